@@ -1,0 +1,68 @@
+"""Whole-array strapdown runs: arrays and an initial state in, solution rows out.
+
+A thin shell over the compiled kernels of strapdown.py; it converts units at
+the edge (degrees in, degrees out, as the contract's files carry them).
+"""
+
+from __future__ import annotations
+
+from typing import Mapping
+
+import numpy as np
+
+from . import strapdown as sd
+
+
+def initial_state(init: Mapping[str, float]) -> np.ndarray:
+    """Kernel state from a contract initial state (degrees, m, m/s)."""
+    v = np.array([init["vn"], init["ve"], init["vd"]], dtype=np.float64)
+    return sd.init_state(
+        float(init["t"]),
+        np.radians(init["lat"]),
+        np.radians(init["lon"]),
+        float(init["h"]),
+        v,
+        np.radians(init["roll"]),
+        np.radians(init["pitch"]),
+        np.radians(init["yaw"]),
+    )
+
+
+def to_file_units(rows: np.ndarray) -> np.ndarray:
+    """Kernel solution rows (radians) to file units (degrees for lat, lon, Euler)."""
+    out = rows.copy()
+    out[:, [1, 2, 7, 8, 9]] = np.degrees(out[:, [1, 2, 7, 8, 9]])
+    return out
+
+
+def navigate(
+    t: np.ndarray,
+    gyro: np.ndarray,
+    accel: np.ndarray,
+    init: Mapping[str, float],
+    *,
+    data: str = "increments",
+    **options: object,
+) -> np.ndarray:
+    """Run the strapdown solution over a whole recording.
+
+    ``data`` is ``increments`` (gyro, accel are dtheta rad, dv m/s per row) or
+    ``rates`` (rad/s, m/s^2; ``imu_rates`` option says averaged or sampled).
+    Other keyword options are those of :func:`strapdown.make_config`.
+    Returns solution rows ``t,lat,lon,h,vn,ve,vd,roll,pitch,yaw,qw,qx,qy,qz``
+    in file units, one row per attitude update.
+    """
+    cfg = sd.make_config(**options)  # type: ignore[arg-type]
+    state = initial_state(init)
+    t = np.ascontiguousarray(t, dtype=np.float64)
+    gyro = np.ascontiguousarray(gyro, dtype=np.float64)
+    accel = np.ascontiguousarray(accel, dtype=np.float64)
+    n_out = t.shape[0] // int(cfg[sd.CFG_SAMPLES]) + 1
+    out = np.empty((n_out, sd.OUT_SIZE))
+    if data == "increments":
+        m = sd.run_increments(state, cfg, t, gyro, accel, out)
+    elif data == "rates":
+        m = sd.run_rates(state, cfg, t, gyro, accel, out)
+    else:
+        raise ValueError(f"data must be increments or rates, got {data!r}")
+    return to_file_units(out[:m])

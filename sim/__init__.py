@@ -1,0 +1,1 @@
+"""Bundled IMU simulator: trajectories, ideal increments and sensor error models."""

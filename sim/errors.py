@@ -1,0 +1,646 @@
+"""IMU sensor error models that corrupt ideal increments (pure numpy).
+
+Data convention (project contract): body frame FRD; row ``i`` of an increment
+log holds ``t[i]`` [s] and the increments over the interval ``(t[i-1], t[i]]``:
+``dtheta`` [rad] (integral of the angular rate) and ``dv`` [m/s] (integral of
+the specific force).  :func:`apply` takes ideal increments and returns
+corrupted ones in the same convention.
+
+Error model, per interval of length ``dt`` (all vectors in the FRD body frame)::
+
+    dtheta_out = (I + S_g)(I + M_g) dtheta + G dv + bias_g * dt + N_g sqrt(dt) n
+    dv_out     = (I + S_a)(I + M_a) dv               + bias_a * dt + N_a sqrt(dt) n
+
+where ``S = diag(scale_factor_ppm) * 1e-6``, ``M`` is the misalignment /
+non-orthogonality matrix (small angles, zero diagonal expected), ``G`` the
+gyro g-sensitivity, ``N`` the angle / velocity random walk and ``n`` unit
+white Gaussian noise.  The bias is ``bias = constant + turn_on + gm(t) +
+rrw(t)``: the turn-on part is drawn once per run, ``gm`` is a first-order
+Gauss-Markov process (bias instability) and ``rrw`` a random walk (rate random
+walk).  Both time-varying states are propagated exactly at the interval
+boundaries (``phi = exp(-dt/tau)``, ``q = sigma^2 (1 - phi^2)`` for the
+Gauss-Markov state, ``q = K^2 dt`` for the random walk) and their integral over
+the interval is taken with the trapezoidal rule on the boundary states.  After
+that the increments pass a residual-carrying quantiser, the timestamps get
+jitter and samples are dropped (see :func:`apply`).
+
+Grade presets (:func:`grade`)
+-----------------------------
+Conventions used to turn datasheet lines into model parameters:
+
+* Angle / velocity random walk: datasheet ARW/VRW, or the rate / acceleration
+  noise density (``deg/s/sqrt(Hz)`` is numerically an ARW in ``deg/sqrt(s)``).
+  Conversions: ``deg/sqrt(h) -> rad/sqrt(s)``: ``* pi/180/60``;
+  ``deg/s/sqrt(Hz) -> rad/sqrt(s)``: ``* pi/180``;
+  ``ug/sqrt(Hz) -> m/s/sqrt(s)``: ``* 9.80665e-6``;
+  ``m/s/sqrt(h) -> m/s/sqrt(s)``: ``/ 60``; ``ft/s/sqrt(h)``: ``* 0.3048/60``.
+* Bias instability ``B`` (the floor of the Allan deviation): modelled as a
+  Gauss-Markov process whose Allan-deviation peak equals ``B``, i.e.
+  ``sigma = B / GM_ADEV_PEAK_RATIO`` (``= B / 0.6174``), reached at
+  ``tau = 1.893 tau_c``.  ``deg/h -> rad/s``: ``* pi/180/3600``;
+  ``ug -> m/s^2``: ``* 9.80665e-6``.  Datasheets do not give ``tau_c``: it is
+  an assumption (column ``tau_c``).
+* Rate random walk: datasheets do not give it; it is set so that its Allan
+  line ``K sqrt(tau/3)`` meets ``B`` at ``tau = 10 tau_c``, i.e.
+  ``K = B sqrt(3 / (10 tau_c))``.
+* Turn-on bias sigma: MEMS datasheet tolerances (``+-x``) are read as 3-sigma
+  limits (sigma = x/3); Honeywell figures are quoted as 1-sigma and used as is
+  (their single bias figure is used for both the turn-on sigma and ``B``).
+* Scale factor, misalignment, g-sensitivity are deterministic fields.  Each
+  preset is one representative unit: the datasheet magnitude (MEMS limits
+  divided by 3, as above) times a fixed sign/size pattern, so runs are
+  repeatable.
+* Quantisation is the increment LSB.  For the MEMS parts it is the rate LSB
+  times the 1 ms sample period of a 1 kHz read-out (16-bit words).
+* Jitter and drop probability describe the logging path, not the sensor;
+  they are assumptions.
+
+Sources: [MPU] InvenSense PS-MPU-6000A-00 rev 3.4 (MPU-6000/6050 product
+specification), sections 6.1 and 6.2; [ICM] TDK InvenSense DS-000176 rev 1.0
+(ICM-20602 datasheet); [ADI] Analog Devices ADIS16470 datasheet (rev C),
+table 1; [HG17] Honeywell HG1700 IMU brochure (AG58 variant); [HG99]
+Honeywell HG9900 IMU brochure (N61-1638-000-000).  Figures marked ``*`` were
+quoted from the datasheet from memory and could not be re-checked against
+the document when this table was written; ``assumed`` marks engineering
+assumptions that no datasheet states.
+
+========================  ========================  ==========================  ==========================  ==========================
+quantity                  consumer                  industrial                  tactical                    navigation
+========================  ========================  ==========================  ==========================  ==========================
+class / reference part    ICM-20602 (MPU-6000)      ADIS16470                   HG1700-AG58                 HG9900
+gyro ARW                  0.004 deg/s/rtHz [ICM]    0.34 deg/rth [ADI]          0.125 deg/rth [HG17]        0.002 deg/rth [HG99]
+  -> rad/sqrt(s)          6.981e-5                  9.890e-5                    3.636e-5                    5.818e-7
+gyro B                    10 deg/h (assumed)        8 deg/h [ADI]               1 deg/h [HG17]              0.0035 deg/h [HG99]
+  -> rad/s                4.848e-5                  3.879e-5                    4.848e-6                    1.697e-8
+gyro tau_c (assumed)      50 s                      100 s                       300 s                       3600 s
+gyro turn-on (+-lim)      +-1 deg/s* [ICM]          0.1 deg/s 1-sigma (assumed) 1 deg/h 1-sigma [HG17]      0.0035 deg/h [HG99]
+  -> sigma rad/s          5.818e-3                  1.745e-3                    4.848e-6                    1.697e-8
+gyro scale factor         +-1 % [ICM]               0.1 % (assumed)             150 ppm*                    5 ppm [HG99]
+gyro misalignment         +-2 % cross-axis [MPU]    0.05 deg (assumed)          0.1 mrad (assumed)          20 urad (assumed)
+gyro g-sensitivity        0.1 deg/s/g [MPU]         0.01 deg/s/g (assumed)      0 (ring-laser gyro)         0 (ring-laser gyro)
+  -> rad/s per m/s^2      1.780e-4                  1.780e-5                    0                           0
+gyro LSB                  16.4 LSB/(deg/s) [MPU]    2160 deg / 2^31* [ADI]      1e-7 rad (assumed)          1e-8 rad (assumed)
+  -> rad                  1.064e-6 (at 1 kHz)       1.755e-8                    1e-7                        1e-8
+accel VRW                 100 ug/rtHz [ICM]         0.037 m/s/rth* [ADI]        0.065 ft/s/rth [HG17]       10 ug/rtHz (assumed)
+  -> m/s/sqrt(s)          9.807e-4                  6.167e-4                    3.302e-4                    9.807e-5
+accel B                   0.1 mg (assumed)          13 ug [ADI]                 1 mg [HG17]                 25 ug [HG99]
+  -> m/s^2                9.807e-4                  1.275e-4                    9.807e-3                    2.452e-4
+accel tau_c (assumed)     50 s                      100 s                       300 s                       3600 s
+accel turn-on (+-lim)     +-25 mg* [ICM]            2 mg 1-sigma (assumed)      1 mg 1-sigma [HG17]         25 ug [HG99]
+  -> sigma m/s^2          8.172e-2                  1.961e-2                    9.807e-3                    2.452e-4
+accel scale factor        +-3 % [MPU]               0.1 % (assumed)             300 ppm*                    100 ppm [HG99]
+accel misalignment        +-2 % cross-axis [MPU]    0.05 deg (assumed)          0.1 mrad (assumed)          20 urad (assumed)
+accel LSB                 2048 LSB/g [MPU]          400 m/s / 2^31* [ADI]       1e-6 m/s (assumed)          1e-7 m/s (assumed)
+  -> m/s                  4.788e-6 (at 1 kHz)       1.863e-7                    1e-6                        1e-7
+timestamp jitter          50 us (assumed)           10 us (assumed)             1 us (assumed)              1 us (assumed)
+drop probability          1e-4 (assumed)            1e-5 (assumed)              0 (assumed)                 0 (assumed)
+========================  ========================  ==========================  ==========================  ==========================
+
+The ``ideal`` grade has every error set to zero: :func:`apply` then returns
+the input unchanged, bit for bit.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = [
+    "GM_ADEV_PEAK_RATIO",
+    "GM_ADEV_PEAK_TAU_RATIO",
+    "GRADES",
+    "ImuErrorModel",
+    "SensorErrorModel",
+    "allan_deviation",
+    "apply",
+    "apply_rows",
+    "gauss_markov_adev",
+    "grade",
+]
+
+Vec3 = tuple[float, float, float]
+Mat3 = tuple[Vec3, Vec3, Vec3]
+
+GM_ADEV_PEAK_RATIO: float = 0.6173642831
+"""Peak Allan deviation of a Gauss-Markov process divided by its sigma."""
+
+GM_ADEV_PEAK_TAU_RATIO: float = 1.8926
+"""Averaging time of that peak divided by the correlation time."""
+
+_G0 = 9.80665
+_DEG = math.pi / 180.0
+_DEG_PER_H = _DEG / 3600.0
+_DEG_PER_RTH = _DEG / 60.0
+_UG = 1e-6 * _G0
+_MG = 1e-3 * _G0
+_FT = 0.3048
+_MAX_EFOLDS = 20.0
+
+_ZERO3: Vec3 = (0.0, 0.0, 0.0)
+_ZERO33: Mat3 = (_ZERO3, _ZERO3, _ZERO3)
+
+
+def _vec3(value: ArrayLike, name: str) -> Vec3:
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be 3 finite numbers, got {value!r}")
+    return (float(arr[0]), float(arr[1]), float(arr[2]))
+
+
+def _mat3(value: ArrayLike, name: str) -> Mat3:
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.shape != (3, 3) or not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be a finite 3x3 matrix, got {value!r}")
+    return (_vec3(arr[0], name), _vec3(arr[1], name), _vec3(arr[2], name))
+
+
+def _nonneg(value: float, name: str) -> float:
+    out = float(value)
+    if not (math.isfinite(out) and out >= 0.0):
+        raise ValueError(f"{name} must be finite and >= 0, got {value!r}")
+    return out
+
+
+@dataclass(frozen=True)
+class SensorErrorModel:
+    """Error parameters of one triad (gyro or accelerometer), FRD body axes.
+
+    Units below use ``u`` for the sensed quantity: rad/s for the gyro, m/s^2
+    for the accelerometer; increments are then in rad or m/s.  Array-like
+    inputs are stored as tuples so instances are immutable and hashable.
+
+    Attributes:
+        bias: constant bias per axis [u].
+        turn_on_bias_sigma: sigma of the per-run bias, drawn once per run [u].
+        bias_instability_sigma: stationary sigma of the Gauss-Markov bias [u].
+        bias_instability_tau: its correlation time [s].
+        random_walk: angle / velocity random walk [u*sqrt(s)], i.e. rad/sqrt(s)
+            or m/s/sqrt(s); ADEV(tau) = random_walk / sqrt(tau).
+        rate_random_walk: bias random walk [u/sqrt(s)];
+            ADEV(tau) = rate_random_walk * sqrt(tau/3).
+        scale_factor_ppm: scale-factor error per axis [ppm].
+        misalignment: small-angle misalignment / non-orthogonality matrix
+            [rad]; the sensed vector is (I + misalignment) times the true one,
+            so the diagonal should be zero (scale lives in scale_factor_ppm).
+        quantization: increment quantisation step [rad or m/s]; 0 = off.
+    """
+
+    bias: Vec3 = _ZERO3
+    turn_on_bias_sigma: float = 0.0
+    bias_instability_sigma: float = 0.0
+    bias_instability_tau: float = 1.0
+    random_walk: float = 0.0
+    rate_random_walk: float = 0.0
+    scale_factor_ppm: Vec3 = _ZERO3
+    misalignment: Mat3 = _ZERO33
+    quantization: float = 0.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "bias", _vec3(self.bias, "bias"))
+        object.__setattr__(self, "scale_factor_ppm", _vec3(self.scale_factor_ppm, "scale_factor_ppm"))
+        object.__setattr__(self, "misalignment", _mat3(self.misalignment, "misalignment"))
+        for name in (
+            "turn_on_bias_sigma",
+            "bias_instability_sigma",
+            "random_walk",
+            "rate_random_walk",
+            "quantization",
+        ):
+            object.__setattr__(self, name, _nonneg(getattr(self, name), name))
+        tau = float(self.bias_instability_tau)
+        if not (math.isfinite(tau) and tau > 0.0):
+            raise ValueError(f"bias_instability_tau must be finite and > 0, got {self.bias_instability_tau!r}")
+        object.__setattr__(self, "bias_instability_tau", tau)
+
+
+@dataclass(frozen=True)
+class ImuErrorModel:
+    """Complete IMU error model: both triads plus timing defects.
+
+    Attributes:
+        gyro: gyro triad errors (u = rad/s).
+        accel: accelerometer triad errors (u = m/s^2).
+        g_sensitivity: gyro rate error per unit specific force
+            [rad/s per m/s^2]; adds ``g_sensitivity @ dv`` to ``dtheta``.
+        jitter_sigma: sigma of the Gaussian error added to each reported
+            timestamp [s].
+        drop_probability: probability that a row is lost, independently per
+            row, in [0, 1).
+    """
+
+    gyro: SensorErrorModel = field(default_factory=SensorErrorModel)
+    accel: SensorErrorModel = field(default_factory=SensorErrorModel)
+    g_sensitivity: Mat3 = _ZERO33
+    jitter_sigma: float = 0.0
+    drop_probability: float = 0.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "g_sensitivity", _mat3(self.g_sensitivity, "g_sensitivity"))
+        object.__setattr__(self, "jitter_sigma", _nonneg(self.jitter_sigma, "jitter_sigma"))
+        p = _nonneg(self.drop_probability, "drop_probability")
+        if p >= 1.0:
+            raise ValueError(f"drop_probability must be < 1, got {p!r}")
+        object.__setattr__(self, "drop_probability", p)
+
+
+def gauss_markov_adev(sigma: float, tau_c: float, tau: ArrayLike) -> NDArray[np.float64]:
+    """Allan deviation of a first-order Gauss-Markov process.
+
+    ``AVAR = (2 sigma^2 / x) [1 - (3 - 4 e^-x + e^-2x) / (2x)]`` with
+    ``x = tau / tau_c`` (IEEE Std 952, exponentially correlated noise with
+    ``q_c = 2 sigma^2 / tau_c``).
+
+    Args:
+        sigma: stationary sigma of the process [u].
+        tau_c: correlation time [s].
+        tau: averaging times [s].
+
+    Returns:
+        Allan deviation at each ``tau`` [u].
+    """
+    x = np.asarray(tau, dtype=np.float64) / tau_c
+    bracket = 1.0 - (3.0 - 4.0 * np.exp(-x) + np.exp(-2.0 * x)) / (2.0 * x)
+    return sigma * np.sqrt(2.0 / x * bracket)
+
+
+def _gm_sigma(bias_instability: float) -> float:
+    return bias_instability / GM_ADEV_PEAK_RATIO
+
+
+def _rrw_from_b(bias_instability: float, tau_c: float) -> float:
+    return bias_instability * math.sqrt(3.0 / (10.0 * tau_c))
+
+
+_SF_PATTERN = np.array([1.0, -0.7, 0.4])
+_MIS_PATTERN = np.array([[0.0, 1.0, -0.6], [-0.8, 0.0, 0.5], [0.3, -0.9, 0.0]])
+_GSENS_PATTERN = np.array([[1.0, 0.2, -0.1], [-0.2, 0.8, 0.1], [0.1, -0.1, 0.6]])
+
+
+def _sensor(
+    *,
+    random_walk: float,
+    bias_instability: float,
+    tau_c: float,
+    turn_on_sigma: float,
+    scale_factor_ppm: float,
+    misalignment: float,
+    quantization: float,
+) -> SensorErrorModel:
+    return SensorErrorModel(
+        turn_on_bias_sigma=turn_on_sigma,
+        bias_instability_sigma=_gm_sigma(bias_instability),
+        bias_instability_tau=tau_c,
+        random_walk=random_walk,
+        rate_random_walk=_rrw_from_b(bias_instability, tau_c),
+        scale_factor_ppm=scale_factor_ppm * _SF_PATTERN,
+        misalignment=misalignment * _MIS_PATTERN,
+        quantization=quantization,
+    )
+
+
+def _consumer() -> ImuErrorModel:
+    gyro = _sensor(
+        random_walk=0.004 * _DEG,
+        bias_instability=10.0 * _DEG_PER_H,
+        tau_c=50.0,
+        turn_on_sigma=1.0 * _DEG / 3.0,
+        scale_factor_ppm=1e4 / 3.0,
+        misalignment=0.02 / 3.0,
+        quantization=_DEG / 16.4 * 1e-3,
+    )
+    accel = _sensor(
+        random_walk=100.0 * _UG,
+        bias_instability=0.1 * _MG,
+        tau_c=50.0,
+        turn_on_sigma=25.0 * _MG / 3.0,
+        scale_factor_ppm=3e4 / 3.0,
+        misalignment=0.02 / 3.0,
+        quantization=_G0 / 2048.0 * 1e-3,
+    )
+    g_sens = 0.1 * _DEG / _G0 * _GSENS_PATTERN
+    return ImuErrorModel(gyro, accel, g_sens, jitter_sigma=50e-6, drop_probability=1e-4)
+
+
+def _industrial() -> ImuErrorModel:
+    gyro = _sensor(
+        random_walk=0.34 * _DEG_PER_RTH,
+        bias_instability=8.0 * _DEG_PER_H,
+        tau_c=100.0,
+        turn_on_sigma=0.1 * _DEG,
+        scale_factor_ppm=1000.0,
+        misalignment=0.05 * _DEG,
+        quantization=2160.0 * _DEG / 2.0**31,
+    )
+    accel = _sensor(
+        random_walk=0.037 / 60.0,
+        bias_instability=13.0 * _UG,
+        tau_c=100.0,
+        turn_on_sigma=2.0 * _MG,
+        scale_factor_ppm=1000.0,
+        misalignment=0.05 * _DEG,
+        quantization=400.0 / 2.0**31,
+    )
+    g_sens = 0.01 * _DEG / _G0 * _GSENS_PATTERN
+    return ImuErrorModel(gyro, accel, g_sens, jitter_sigma=10e-6, drop_probability=1e-5)
+
+
+def _tactical() -> ImuErrorModel:
+    gyro = _sensor(
+        random_walk=0.125 * _DEG_PER_RTH,
+        bias_instability=1.0 * _DEG_PER_H,
+        tau_c=300.0,
+        turn_on_sigma=1.0 * _DEG_PER_H,
+        scale_factor_ppm=150.0,
+        misalignment=1e-4,
+        quantization=1e-7,
+    )
+    accel = _sensor(
+        random_walk=0.065 * _FT / 60.0,
+        bias_instability=1.0 * _MG,
+        tau_c=300.0,
+        turn_on_sigma=1.0 * _MG,
+        scale_factor_ppm=300.0,
+        misalignment=1e-4,
+        quantization=1e-6,
+    )
+    return ImuErrorModel(gyro, accel, _ZERO33, jitter_sigma=1e-6, drop_probability=0.0)
+
+
+def _navigation() -> ImuErrorModel:
+    gyro = _sensor(
+        random_walk=0.002 * _DEG_PER_RTH,
+        bias_instability=0.0035 * _DEG_PER_H,
+        tau_c=3600.0,
+        turn_on_sigma=0.0035 * _DEG_PER_H,
+        scale_factor_ppm=5.0,
+        misalignment=20e-6,
+        quantization=1e-8,
+    )
+    accel = _sensor(
+        random_walk=10.0 * _UG,
+        bias_instability=25.0 * _UG,
+        tau_c=3600.0,
+        turn_on_sigma=25.0 * _UG,
+        scale_factor_ppm=100.0,
+        misalignment=20e-6,
+        quantization=1e-7,
+    )
+    return ImuErrorModel(gyro, accel, _ZERO33, jitter_sigma=1e-6, drop_probability=0.0)
+
+
+_BUILDERS = {
+    "ideal": ImuErrorModel,
+    "consumer": _consumer,
+    "industrial": _industrial,
+    "tactical": _tactical,
+    "navigation": _navigation,
+}
+
+GRADES: tuple[str, ...] = tuple(_BUILDERS)
+"""Names accepted by :func:`grade` (parameters in the module docstring table)."""
+
+
+def grade(name: str) -> ImuErrorModel:
+    """Return the preset error model ``name`` (one of :data:`GRADES`).
+
+    Raises:
+        ValueError: unknown grade name.
+    """
+    try:
+        builder = _BUILDERS[name]
+    except KeyError:
+        raise ValueError(f"unknown IMU grade {name!r}; choose one of {GRADES}") from None
+    return builder()
+
+
+_STREAMS = (
+    "gyro_turn_on",
+    "gyro_gm",
+    "gyro_rrw",
+    "gyro_white",
+    "accel_turn_on",
+    "accel_gm",
+    "accel_rrw",
+    "accel_white",
+    "jitter",
+    "drop",
+)
+
+
+def _generators(seed: int) -> dict[str, np.random.Generator]:
+    children = np.random.SeedSequence(seed).spawn(len(_STREAMS))
+    return {name: np.random.Generator(np.random.PCG64(child)) for name, child in zip(_STREAMS, children)}
+
+
+def _gauss_markov_states(
+    sigma: float, tau: float, dt: NDArray[np.float64], rng: np.random.Generator
+) -> NDArray[np.float64]:
+    """Exact discrete Gauss-Markov states at the N+1 interval boundaries, shape (N+1, 3)."""
+    n = dt.size
+    states = np.empty((n + 1, 3))
+    states[0] = sigma * rng.standard_normal(3)
+    efolds = dt / tau
+    phi = np.exp(-efolds)
+    noise = (sigma * np.sqrt(-np.expm1(-2.0 * efolds)))[:, None] * rng.standard_normal((n, 3))
+    cum = np.cumsum(efolds)
+    start = 0
+    while start < n:
+        base = cum[start - 1] if start > 0 else 0.0
+        stop = max(int(np.searchsorted(cum, base + _MAX_EFOLDS, side="right")), start + 1)
+        if stop == start + 1:
+            states[start + 1] = phi[start] * states[start] + noise[start]
+        else:
+            decay = np.exp(-(cum[start:stop] - base))[:, None]
+            states[start + 1 : stop + 1] = decay * (states[start] + np.cumsum(noise[start:stop] / decay, axis=0))
+        start = stop
+    return states
+
+
+def _quantize(x: NDArray[np.float64], step: float) -> NDArray[np.float64]:
+    """Residual-carrying quantiser: outputs are multiples of ``step`` and the
+    running sum of the outputs stays within step/2 of the running sum of ``x``."""
+    counts = np.rint(np.cumsum(x, axis=0) / step)
+    return np.diff(counts, axis=0, prepend=0.0) * step
+
+
+def _corrupt_triad(
+    err: SensorErrorModel,
+    x: NDArray[np.float64],
+    dt: NDArray[np.float64],
+    rngs: dict[str, np.random.Generator],
+    prefix: str,
+    coupling: NDArray[np.float64] | None,
+) -> NDArray[np.float64]:
+    out = x.copy()
+    scale = np.diag(np.asarray(err.scale_factor_ppm) * 1e-6)
+    mis = np.asarray(err.misalignment)
+    if scale.any() or mis.any():
+        out = x @ ((np.eye(3) + scale) @ (np.eye(3) + mis)).T
+    if coupling is not None:
+        out = out + coupling
+    dt_col = dt[:, None]
+    bias = np.asarray(err.bias)
+    if err.turn_on_bias_sigma > 0.0:
+        bias = bias + err.turn_on_bias_sigma * rngs[f"{prefix}_turn_on"].standard_normal(3)
+    if bias.any():
+        out = out + bias * dt_col
+    if err.bias_instability_sigma > 0.0:
+        states = _gauss_markov_states(
+            err.bias_instability_sigma, err.bias_instability_tau, dt, rngs[f"{prefix}_gm"]
+        )
+        out = out + 0.5 * (states[:-1] + states[1:]) * dt_col
+    if err.rate_random_walk > 0.0:
+        steps = err.rate_random_walk * np.sqrt(dt_col) * rngs[f"{prefix}_rrw"].standard_normal((dt.size, 3))
+        states = np.concatenate([np.zeros((1, 3)), np.cumsum(steps, axis=0)])
+        out = out + 0.5 * (states[:-1] + states[1:]) * dt_col
+    if err.random_walk > 0.0:
+        out = out + err.random_walk * np.sqrt(dt_col) * rngs[f"{prefix}_white"].standard_normal((dt.size, 3))
+    if err.quantization > 0.0:
+        out = _quantize(out, err.quantization)
+    return out
+
+
+def _jitter(t: NDArray[np.float64], dt: NDArray[np.float64], sigma: float, rng: np.random.Generator) -> NDArray[np.float64]:
+    """Gaussian timestamp error, truncated to +-0.45 of the shorter adjacent
+    interval so that the output stays strictly increasing."""
+    nxt = np.append(dt[1:], dt[-1])
+    limit = 0.45 * np.minimum(dt, nxt)
+    err = np.clip(sigma * rng.standard_normal(t.size), -limit, limit)
+    return t + err
+
+
+def apply(
+    model: ImuErrorModel,
+    t: ArrayLike,
+    dtheta: ArrayLike,
+    dv: ArrayLike,
+    seed: int,
+    *,
+    t_start: float | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+    """Corrupt ideal IMU increments with ``model``.
+
+    Deterministic for a given ``seed``: a ``numpy.random.SeedSequence(seed)``
+    is split into one PCG64 stream per error source, so switching one source
+    on or off does not change the random numbers of the others.
+
+    Args:
+        model: error model (see :func:`grade`).
+        t: (N,) strictly increasing end times of the intervals [s].
+        dtheta: (N, 3) true angle increments over ``(t[i-1], t[i]]``, FRD [rad].
+        dv: (N, 3) true specific-force velocity increments, FRD [m/s].
+        seed: seed of the run.
+        t_start: start of the first interval [s]; defaults to
+            ``t[0] - (t[1] - t[0])`` (required when N == 1).
+
+    Returns:
+        ``(t_out, dtheta_out, dv_out, kept_mask)``: the kept rows only, and a
+        (N,) boolean mask telling which input rows were kept.
+
+        * ``t_out`` carries the timestamp jitter (truncated so that times
+          stay strictly increasing); the increments still integrate over the
+          *true* intervals ``(t[i-1], t[i]]``: jitter only corrupts the
+          reported times.
+        * A dropped row is lost, as in a real logger drop: its increment is
+          removed, not merged into the next kept row, whose increment still
+          covers only its own true interval.  Quantisation happens in the
+          sensor, before the drop, so the quantiser residual is not affected
+          by drops.
+    """
+    t_arr = np.asarray(t, dtype=np.float64)
+    dth = np.asarray(dtheta, dtype=np.float64)
+    dvel = np.asarray(dv, dtype=np.float64)
+    n = t_arr.size
+    if t_arr.ndim != 1 or dth.shape != (n, 3) or dvel.shape != (n, 3):
+        raise ValueError(f"expected t (N,), dtheta (N,3), dv (N,3); got {t_arr.shape}, {dth.shape}, {dvel.shape}")
+    if n == 0:
+        return t_arr.copy(), dth.copy(), dvel.copy(), np.ones(0, dtype=bool)
+    if t_start is None:
+        if n < 2:
+            raise ValueError("t_start is required when there is a single row")
+        t_start = float(t_arr[0] - (t_arr[1] - t_arr[0]))
+    dt = np.diff(t_arr, prepend=t_start)
+    if not np.all(dt > 0.0):
+        raise ValueError("times must be strictly increasing and t_start < t[0]")
+
+    rngs = _generators(seed)
+    coupling = dvel @ np.asarray(model.g_sensitivity).T if np.any(model.g_sensitivity) else None
+    dth_out = _corrupt_triad(model.gyro, dth, dt, rngs, "gyro", coupling)
+    dv_out = _corrupt_triad(model.accel, dvel, dt, rngs, "accel", None)
+
+    t_out = t_arr.copy()
+    if model.jitter_sigma > 0.0:
+        t_out = _jitter(t_arr, dt, model.jitter_sigma, rngs["jitter"])
+    kept = np.ones(n, dtype=bool)
+    if model.drop_probability > 0.0:
+        kept = rngs["drop"].random(n) >= model.drop_probability
+        return t_out[kept], dth_out[kept], dv_out[kept], kept
+    return t_out, dth_out, dv_out, kept
+
+
+def apply_rows(
+    model: ImuErrorModel, rows: ArrayLike, seed: int, *, t_start: float | None = None
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """:func:`apply` on contract rows ``t,dtheta_x,dtheta_y,dtheta_z,dv_x,dv_y,dv_z``.
+
+    Args:
+        model: error model.
+        rows: (N, 7) increment rows (see module docstring for units).
+        seed: seed of the run.
+        t_start: start of the first interval [s], as in :func:`apply`.
+
+    Returns:
+        ``(rows_out, kept_mask)``: (M, 7) corrupted kept rows and the (N,) mask.
+    """
+    arr = np.asarray(rows, dtype=np.float64)
+    if arr.ndim != 2 or arr.shape[1] != 7:
+        raise ValueError(f"rows must have shape (N, 7), got {arr.shape}")
+    t_out, dth, dvel, kept = apply(model, arr[:, 0], arr[:, 1:4], arr[:, 4:7], seed, t_start=t_start)
+    return np.column_stack([t_out, dth, dvel]), kept
+
+
+def allan_deviation(
+    rate: ArrayLike, dt: float, taus: ArrayLike | None = None
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Overlapping Allan deviation of a uniformly sampled rate signal.
+
+    Args:
+        rate: (N,) or (N, k) samples, each the mean rate over one period
+            (e.g. ``dtheta / dt``) [u].
+        dt: sample period [s].
+        taus: requested averaging times [s]; rounded to multiples ``m dt``
+            with ``1 <= m <= N // 2``, duplicates removed.  Default: about 60
+            log-spaced values over that range.
+
+    Returns:
+        ``(taus, adev)``: the averaging times used [s], shape (T,), and the
+        Allan deviation [u], shape (T,) or (T, k).
+    """
+    y = np.asarray(rate, dtype=np.float64)
+    one_d = y.ndim == 1
+    if one_d:
+        y = y[:, None]
+    if y.ndim != 2:
+        raise ValueError(f"rate must be (N,) or (N, k), got {np.shape(rate)}")
+    n = y.shape[0]
+    if n < 2 or not dt > 0.0:
+        raise ValueError("need at least two samples and dt > 0")
+    m_max = n // 2
+    if taus is None:
+        m = np.unique(np.rint(np.logspace(0.0, math.log10(m_max), 60)).astype(np.int64))
+    else:
+        m = np.unique(np.rint(np.asarray(taus, dtype=np.float64) / dt).astype(np.int64))
+        m = m[(m >= 1) & (m <= m_max)]
+    # Phase (integrated rate); the mean is removed first for numerical range,
+    # which leaves the Allan variance unchanged.
+    phase = np.zeros((n + 1, y.shape[1]))
+    np.cumsum((y - y.mean(axis=0)) * dt, axis=0, out=phase[1:])
+    adev = np.empty((m.size, y.shape[1]))
+    for i, mi in enumerate(m):
+        d2 = phase[2 * mi :] - 2.0 * phase[mi:-mi] + phase[: -2 * mi]
+        tau = mi * dt
+        adev[i] = np.sqrt(np.mean(d2 * d2, axis=0) / (2.0 * tau * tau))
+    return m * dt, adev[:, 0] if one_d else adev
