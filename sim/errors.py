@@ -39,19 +39,22 @@ Conventions used to turn datasheet lines into model parameters:
   ``sigma = B / GM_ADEV_PEAK_RATIO`` (``= B / 0.6174``), reached at
   ``tau = 1.893 tau_c``.  ``deg/h -> rad/s``: ``* pi/180/3600``;
   ``ug -> m/s^2``: ``* 9.80665e-6``.  Datasheets do not give ``tau_c``: it is
-  an assumption (column ``tau_c``).
+  an assumption (row ``tau_c``).
 * Rate random walk: datasheets do not give it; it is set so that its Allan
   line ``K sqrt(tau/3)`` meets ``B`` at ``tau = 10 tau_c``, i.e.
   ``K = B sqrt(3 / (10 tau_c))``.
 * Turn-on bias sigma: MEMS datasheet tolerances (``+-x``) are read as 3-sigma
-  limits (sigma = x/3); Honeywell figures are quoted as 1-sigma and used as is
-  (their single bias figure is used for both the turn-on sigma and ``B``).
+  limits (sigma = x/3); Honeywell figures are quoted as 1-sigma and used as is.
+  Honeywell gives one gyro bias figure, used for both the turn-on sigma and
+  ``B``; the HG1700 1 mg accelerometer bias is used as the turn-on sigma only,
+  its in-run ``B`` is assumed.
 * Scale factor, misalignment, g-sensitivity are deterministic fields.  Each
-  preset is one representative unit: the datasheet magnitude (MEMS limits
-  divided by 3, as above) times a fixed sign/size pattern, so runs are
-  repeatable.
-* Quantisation is the increment LSB.  For the MEMS parts it is the rate LSB
-  times the 1 ms sample period of a 1 kHz read-out (16-bit words).
+  preset is one representative unit: a magnitude (MEMS ``+-`` limits divided
+  by 3, typical or assumed values as they are) times a fixed sign/size
+  pattern, so runs are repeatable.
+* Quantisation is the increment LSB: for the consumer part the 16-bit rate
+  LSB times the 1 ms sample period of a 1 kHz read-out; for the ADIS16470 the
+  LSB of its 32-bit delta-angle / delta-velocity registers.
 * Jitter and drop probability describe the logging path, not the sensor;
   they are assumptions.
 
@@ -64,37 +67,52 @@ quoted from the datasheet from memory and could not be re-checked against
 the document when this table was written; ``assumed`` marks engineering
 assumptions that no datasheet states.
 
-========================  ========================  ==========================  ==========================  ==========================
-quantity                  consumer                  industrial                  tactical                    navigation
-========================  ========================  ==========================  ==========================  ==========================
-class / reference part    ICM-20602 (MPU-6000)      ADIS16470                   HG1700-AG58                 HG9900
-gyro ARW                  0.004 deg/s/rtHz [ICM]    0.34 deg/rth [ADI]          0.125 deg/rth [HG17]        0.002 deg/rth [HG99]
-  -> rad/sqrt(s)          6.981e-5                  9.890e-5                    3.636e-5                    5.818e-7
-gyro B                    10 deg/h (assumed)        8 deg/h [ADI]               1 deg/h [HG17]              0.0035 deg/h [HG99]
-  -> rad/s                4.848e-5                  3.879e-5                    4.848e-6                    1.697e-8
-gyro tau_c (assumed)      50 s                      100 s                       300 s                       3600 s
-gyro turn-on (+-lim)      +-1 deg/s* [ICM]          0.1 deg/s 1-sigma (assumed) 1 deg/h 1-sigma [HG17]      0.0035 deg/h [HG99]
-  -> sigma rad/s          5.818e-3                  1.745e-3                    4.848e-6                    1.697e-8
-gyro scale factor         +-1 % [ICM]               0.1 % (assumed)             150 ppm*                    5 ppm [HG99]
-gyro misalignment         +-2 % cross-axis [MPU]    0.05 deg (assumed)          0.1 mrad (assumed)          20 urad (assumed)
-gyro g-sensitivity        0.1 deg/s/g [MPU]         0.01 deg/s/g (assumed)      0 (ring-laser gyro)         0 (ring-laser gyro)
-  -> rad/s per m/s^2      1.780e-4                  1.780e-5                    0                           0
-gyro LSB                  16.4 LSB/(deg/s) [MPU]    2160 deg / 2^31* [ADI]      1e-7 rad (assumed)          1e-8 rad (assumed)
-  -> rad                  1.064e-6 (at 1 kHz)       1.755e-8                    1e-7                        1e-8
-accel VRW                 100 ug/rtHz [ICM]         0.037 m/s/rth* [ADI]        0.065 ft/s/rth [HG17]       10 ug/rtHz (assumed)
-  -> m/s/sqrt(s)          9.807e-4                  6.167e-4                    3.302e-4                    9.807e-5
-accel B                   0.1 mg (assumed)          13 ug [ADI]                 1 mg [HG17]                 25 ug [HG99]
-  -> m/s^2                9.807e-4                  1.275e-4                    9.807e-3                    2.452e-4
-accel tau_c (assumed)     50 s                      100 s                       300 s                       3600 s
-accel turn-on (+-lim)     +-25 mg* [ICM]            2 mg 1-sigma (assumed)      1 mg 1-sigma [HG17]         25 ug [HG99]
-  -> sigma m/s^2          8.172e-2                  1.961e-2                    9.807e-3                    2.452e-4
-accel scale factor        +-3 % [MPU]               0.1 % (assumed)             300 ppm*                    100 ppm [HG99]
-accel misalignment        +-2 % cross-axis [MPU]    0.05 deg (assumed)          0.1 mrad (assumed)          20 urad (assumed)
-accel LSB                 2048 LSB/g [MPU]          400 m/s / 2^31* [ADI]       1e-6 m/s (assumed)          1e-7 m/s (assumed)
-  -> m/s                  4.788e-6 (at 1 kHz)       1.863e-7                    1e-6                        1e-7
-timestamp jitter          50 us (assumed)           10 us (assumed)             1 us (assumed)              1 us (assumed)
-drop probability          1e-4 (assumed)            1e-5 (assumed)              0 (assumed)                 0 (assumed)
-========================  ========================  ==========================  ==========================  ==========================
+Datasheet figures (or assumptions) per grade; ``rth`` = sqrt(hour):
+
+=================  =====================  ======================  =====================  =====================
+quantity           consumer               industrial              tactical               navigation
+=================  =====================  ======================  =====================  =====================
+reference part     ICM-20602 / MPU-6000   ADIS16470               HG1700-AG58            HG9900
+gyro ARW           4 mdps/rtHz [ICM]      0.34 deg/rth [ADI]      0.125 deg/rth [HG17]   0.002 deg/rth [HG99]
+gyro B             10 deg/h (assumed)     8 deg/h [ADI]           1 deg/h [HG17]         0.0035 deg/h [HG99]
+gyro turn-on       +-1 deg/s* [ICM]       0.1 deg/s (assumed)     1 deg/h [HG17]         0.0035 deg/h [HG99]
+gyro scale         +-1 % [ICM]            0.1 % (assumed)         150 ppm* [HG17]        5 ppm [HG99]
+gyro misalign      +-2 % cross [MPU]      0.05 deg (assumed)      0.1 mrad (assumed)     20 urad (assumed)
+gyro g-sens        0.1 deg/s/g [MPU]      0.01 deg/s/g (assumed)  0 (RLG, assumed)       0 (RLG, assumed)
+gyro LSB           16.4 LSB/dps [MPU]     2160 deg/2^31* [ADI]    assumed                assumed
+accel VRW          100 ug/rtHz [ICM]      0.037 m/s/rth* [ADI]    0.065 ft/s/rth [HG17]  10 ug/rtHz (assumed)
+accel B            0.1 mg (assumed)       13 ug [ADI]             50 ug (assumed)        25 ug [HG99]
+accel turn-on      +-25 mg* [ICM]         2 mg (assumed)          1 mg [HG17]            25 ug [HG99]
+accel scale        +-3 % [MPU]            0.1 % (assumed)         300 ppm* [HG17]        100 ppm [HG99]
+accel misalign     +-2 % cross [MPU]      0.05 deg (assumed)      0.1 mrad (assumed)     20 urad (assumed)
+accel LSB          2048 LSB/g [MPU]       400 m/s/2^31* [ADI]     assumed                assumed
+tau_c (both)       50 s (assumed)         100 s (assumed)         300 s (assumed)        3600 s (assumed)
+timestamp jitter   50 us (assumed)        10 us (assumed)         1 us (assumed)         1 us (assumed)
+drop probability   1e-4 (assumed)         1e-5 (assumed)          0                      0
+=================  =====================  ======================  =====================  =====================
+
+Resulting model values (turn-on: 1-sigma; scale, misalignment and
+g-sensitivity: magnitude before the fixed pattern; LSB at 1 kHz for consumer):
+
+=====================  ==========  ==========  ==========  ==========  =================
+model value            consumer    industrial  tactical    navigation  unit
+=====================  ==========  ==========  ==========  ==========  =================
+gyro random_walk       6.981e-5    9.890e-5    3.636e-5    5.818e-7    rad/sqrt(s)
+gyro B                 4.848e-5    3.879e-5    4.848e-6    1.697e-8    rad/s
+gyro rate random walk  3.755e-6    2.124e-6    1.533e-7    1.549e-10   rad/s/sqrt(s)
+gyro turn-on sigma     5.818e-3    1.745e-3    4.848e-6    1.697e-8    rad/s
+gyro scale factor      3333        1000        150         5           ppm
+gyro misalignment      6.667e-3    8.727e-4    1e-4        2e-5        rad
+g-sensitivity          1.780e-4    1.780e-5    0           0           rad/s per m/s^2
+gyro LSB               1.064e-6    1.756e-8    1e-7        1e-8        rad
+accel random_walk      9.807e-4    6.167e-4    3.302e-4    9.807e-5    m/s/sqrt(s)
+accel B                9.807e-4    1.275e-4    4.903e-4    2.452e-4    m/s^2
+accel rate random walk 7.596e-5    6.983e-6    1.551e-5    2.238e-6    m/s^2/sqrt(s)
+accel turn-on sigma    8.172e-2    1.961e-2    9.807e-3    2.452e-4    m/s^2
+accel scale factor     10000       1000        300         100         ppm
+accel misalignment     6.667e-3    8.727e-4    1e-4        2e-5        rad
+accel LSB              4.788e-6    1.863e-7    1e-6        1e-7        m/s
+=====================  ==========  ==========  ==========  ==========  =================
 
 The ``ideal`` grade has every error set to zero: :func:`apply` then returns
 the input unchanged, bit for bit.
@@ -359,7 +377,7 @@ def _tactical() -> ImuErrorModel:
     )
     accel = _sensor(
         random_walk=0.065 * _FT / 60.0,
-        bias_instability=1.0 * _MG,
+        bias_instability=50.0 * _UG,
         tau_c=300.0,
         turn_on_sigma=1.0 * _MG,
         scale_factor_ppm=300.0,
@@ -445,6 +463,10 @@ def _gauss_markov_states(
     efolds = dt / tau
     phi = np.exp(-efolds)
     noise = (sigma * np.sqrt(-np.expm1(-2.0 * efolds)))[:, None] * rng.standard_normal((n, 3))
+    # Closed form of b_k = phi_k b_{k-1} + w_k inside a block:
+    # b_k = P_k (b_start + sum_j w_j / P_j) with P_k the product of the phis
+    # since the block start; blocks end before P drops below exp(-_MAX_EFOLDS)
+    # so that 1/P stays well inside the float range.
     cum = np.cumsum(efolds)
     start = 0
     while start < n:
@@ -503,7 +525,9 @@ def _corrupt_triad(
     return out
 
 
-def _jitter(t: NDArray[np.float64], dt: NDArray[np.float64], sigma: float, rng: np.random.Generator) -> NDArray[np.float64]:
+def _jitter(
+    t: NDArray[np.float64], dt: NDArray[np.float64], sigma: float, rng: np.random.Generator
+) -> NDArray[np.float64]:
     """Gaussian timestamp error, truncated to +-0.45 of the shorter adjacent
     interval so that the output stays strictly increasing."""
     nxt = np.append(dt[1:], dt[-1])

@@ -63,12 +63,17 @@ def test_ideal_is_identity_bit_for_bit() -> None:
 
 
 # Second table of the sim.errors docstring: (gyro ARW, gyro B, gyro turn-on,
-# gyro LSB, g-sensitivity, accel VRW, accel B, accel turn-on, accel LSB), SI.
+# gyro LSB, g-sensitivity, accel VRW, accel B, accel turn-on, accel LSB,
+# gyro rate random walk, accel rate random walk), SI.
 _TABLE = {
-    "consumer": (6.981e-5, 4.848e-5, 5.818e-3, 1.064e-6, 1.780e-4, 9.807e-4, 9.807e-4, 8.172e-2, 4.788e-6),
-    "industrial": (9.890e-5, 3.879e-5, 1.745e-3, 1.756e-8, 1.780e-5, 6.167e-4, 1.275e-4, 1.961e-2, 1.863e-7),
-    "tactical": (3.636e-5, 4.848e-6, 4.848e-6, 1e-7, 0.0, 3.302e-4, 4.903e-4, 9.807e-3, 1e-6),
-    "navigation": (5.818e-7, 1.697e-8, 1.697e-8, 1e-8, 0.0, 9.807e-5, 2.452e-4, 2.452e-4, 1e-7),
+    "consumer": (
+        6.981e-5, 4.848e-5, 5.818e-3, 1.064e-6, 1.780e-4, 9.807e-4, 9.807e-4, 8.172e-2, 4.788e-6, 3.755e-6, 7.596e-5
+    ),
+    "industrial": (
+        9.890e-5, 3.879e-5, 1.745e-3, 1.756e-8, 1.780e-5, 6.167e-4, 1.275e-4, 1.961e-2, 1.863e-7, 2.124e-6, 6.983e-6
+    ),
+    "tactical": (3.636e-5, 4.848e-6, 4.848e-6, 1e-7, 0.0, 3.302e-4, 4.903e-4, 9.807e-3, 1e-6, 1.533e-7, 1.551e-5),
+    "navigation": (5.818e-7, 1.697e-8, 1.697e-8, 1e-8, 0.0, 9.807e-5, 2.452e-4, 2.452e-4, 1e-7, 1.549e-10, 2.238e-6),
 }
 
 
@@ -85,6 +90,8 @@ def test_preset_values_match_docstring_table(name: str) -> None:
         m.accel.bias_instability_sigma * E.GM_ADEV_PEAK_RATIO,
         m.accel.turn_on_bias_sigma,
         m.accel.quantization,
+        m.gyro.rate_random_walk,
+        m.accel.rate_random_walk,
     )
     assert got == pytest.approx(_TABLE[name], rel=1e-3)
 
