@@ -117,6 +117,87 @@ def _cmd_nav(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_sim(sub: argparse._SubParsersAction) -> None:
+    from sim import SCENARIO_DIR
+
+    names = sorted(p.stem for p in SCENARIO_DIR.glob("*.toml"))
+    p = sub.add_parser(
+        "sim",
+        help="IMU simulator: write files or stream MAVLink like an autopilot",
+        description=(
+            "Simulate a scenario with exact IMU increments and ground truth. Write the contract's "
+            "files (imu.csv, imu_rates.csv, truth.csv, init.json) with -o DIR, or stream it over "
+            "MAVLink with --stream URL (HEARTBEAT, HIGHRES_IMU or RAW_IMU, SIM_STATE truth, "
+            "GPS_RAW_INT, SCALED_PRESSURE)."
+        ),
+        epilog="built-in scenarios: " + ", ".join(names) + ". A path to your own .toml works too "
+        "(see docs/simulator.md).",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    p.add_argument("scenario", metavar="SCENARIO", help="built-in name or path to a scenario .toml")
+    out = p.add_mutually_exclusive_group(required=True)
+    out.add_argument("-o", "--output", type=Path, metavar="DIR", help="write the files into DIR")
+    out.add_argument("--stream", metavar="URL", help="stream over MAVLink to a pymavlink URL, e.g. udpout:127.0.0.1:14551")
+    p.add_argument("--duration", type=float, default=None, metavar="S", help="seconds to simulate (default: the scenario's)")
+    p.add_argument("--rate", type=float, default=None, metavar="HZ", help="IMU sample rate (default: the scenario's)")
+    p.add_argument("--seed", type=int, default=0, help="random seed of the sensor errors")
+    p.add_argument(
+        "--grade",
+        choices=("ideal", "consumer", "industrial", "tactical", "navigation"),
+        default=None,
+        help="sensor error preset; ideal = no errors (default: the scenario's, else ideal)",
+    )
+    p.add_argument("--msg", choices=("highres", "raw"), default="highres", help="IMU message when streaming")
+    p.add_argument(
+        "--imu-rates",
+        choices=("averaged", "sampled"),
+        default="averaged",
+        help="HIGHRES_IMU carries interval averages (like PX4) or instantaneous samples",
+    )
+    p.add_argument("--speed", default="1", metavar="X|max", help="streaming pace: 1 = real time, 10 = ten times, max = as fast as possible")
+    p.add_argument("--sysid", type=int, default=1, help="system id of the simulated autopilot")
+    p.set_defaults(func=_cmd_sim)
+
+
+def _cmd_sim(args: argparse.Namespace) -> int:
+    from sim.scenarios import ScenarioError, load
+
+    try:
+        scenario = load(args.scenario)
+    except ScenarioError as exc:
+        print(f"mavins sim: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    speed: float | None
+    if args.speed == "max":
+        speed = None
+    else:
+        try:
+            speed = float(args.speed)
+        except ValueError:
+            print(f"mavins sim: error: --speed takes a number or 'max', got {args.speed!r}", file=sys.stderr)
+            return EXIT_USAGE
+        if speed <= 0:
+            print("mavins sim: error: --speed must be positive", file=sys.stderr)
+            return EXIT_USAGE
+    from sim.generate import generate, write
+
+    try:
+        run = generate(scenario, duration=args.duration, rate=args.rate, seed=args.seed, grade=args.grade)
+    except ValueError as exc:
+        print(f"mavins sim: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    if args.output is not None:
+        paths = write(run, args.output)
+        print(f"mavins sim: {scenario.name}: {len(run.t)} samples at {run.rate:g} Hz, grade {run.grade}: "
+              + ", ".join(str(p) for p in paths), file=sys.stderr)
+        return 0
+    from sim.stream import StreamOptions, stream
+
+    stats = stream(run, args.stream, StreamOptions(msg=args.msg, imu_rates=args.imu_rates, speed=speed, sysid=args.sysid))
+    print(f"mavins sim: streamed {stats.imu_messages} IMU messages to {args.stream}", file=sys.stderr)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The full ``mavins`` parser with every subcommand."""
     parser = argparse.ArgumentParser(
@@ -141,7 +222,7 @@ def _version() -> str:
         return "unknown"
 
 
-_EXTRA_COMMANDS: list[Callable[[argparse._SubParsersAction], None]] = []
+_EXTRA_COMMANDS: list[Callable[[argparse._SubParsersAction], None]] = [_add_sim]
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -19,6 +19,7 @@ import numpy as np
 
 from mavins.core import earth
 from mavins.core.rotation import quat_to_euler
+from mavins.progress import Progress
 
 from . import kinematics as kin
 
@@ -412,8 +413,16 @@ def simulate(traj: Trajectory | MotionSpec, rate: float, duration: float | None 
     dv = np.empty((n, 3))
     pos = np.empty((n, 3))
     p0 = (spec.lat, spec.lon) if spec.use_earth else (0.0, 0.0)
-    kin.integrate(spec.t0, t, substeps, p0[0], p0[1], spec.h, spec.starts, spec.durs, spec.coefs, spec.counts,
-                  spec.vib, spec.consts, spec.linvib, spec.use_earth, dtheta, dv, pos)
+    chunk = 20000
+    with Progress("simulate", n) as bar:
+        t_prev, p_prev = spec.t0, (p0[0], p0[1], spec.h)
+        for a in range(0, n, chunk):
+            b = min(a + chunk, n)
+            kin.integrate(t_prev, t[a:b], substeps, p_prev[0], p_prev[1], p_prev[2], spec.starts, spec.durs,
+                          spec.coefs, spec.counts, spec.vib, spec.consts, spec.linvib, spec.use_earth,
+                          dtheta[a:b], dv[a:b], pos[a:b])
+            t_prev, p_prev = t[b - 1], (pos[b - 1, 0], pos[b - 1, 1], pos[b - 1, 2])
+            bar.update(b)
     tt = np.concatenate(([spec.t0], t))
     rows = np.empty((n + 1, 13))
     kin.truth(tt, spec.starts, spec.durs, spec.coefs, spec.counts, spec.vib, spec.consts, spec.linvib, rows)
