@@ -147,11 +147,10 @@ def write_init(path: str | Path, init: InitialState) -> None:
 
 
 def format_rows(data: np.ndarray) -> str:
-    """CSV body with shortest round-trip float text (numpy's repr algorithm)."""
+    """CSV body with shortest round-trip float text (Python's float repr)."""
     if data.shape[0] == 0:
         return ""
-    text = data.astype(str)
-    return "\n".join(",".join(row) for row in text.tolist()) + "\n"
+    return "\n".join(",".join(map(repr, row)) for row in data.tolist()) + "\n"
 
 
 def write_table(path: str | Path, columns: tuple[str, ...], data: np.ndarray) -> None:
