@@ -198,6 +198,225 @@ def _cmd_sim(args: argparse.Namespace) -> int:
     return 0
 
 
+def _nav_options(p: argparse.ArgumentParser) -> None:
+    """Navigation options shared by run, replay (CONVENTIONS.md ``mavins run``)."""
+    g = p.add_argument_group("navigation")
+    g.add_argument("--lat", type=float, metavar="DEG", help="initial latitude (else the vehicle's first good GPS fix)")
+    g.add_argument("--lon", type=float, metavar="DEG", help="initial longitude")
+    g.add_argument("--alt", type=float, metavar="M", help="initial ellipsoidal height")
+    g.add_argument("--heading", default="auto", metavar="DEG|SOURCE",
+                   help="initial yaw in degrees, or a source: vehicle (its ATTITUDE), mag (magnetometer), "
+                        "gyrocompass (navigation-grade gyros), auto (vehicle, else mag, else gyrocompass)")
+    g.add_argument("--declination", type=float, default=0.0, metavar="DEG", help="magnetic declination for --heading mag")
+    g.add_argument("--align", type=float, default=10.0, metavar="S", help="static coarse alignment window (sensor time)")
+    g.add_argument("--imu-rates", choices=("averaged", "sampled"), default="averaged",
+                   help="IMU rates are interval averages (PX4 HIGHRES_IMU) or instantaneous samples")
+    g.add_argument("--samples", type=_positive_int(1, 6), default=2, metavar="N", help="samples per attitude update (1..6)")
+    g.add_argument("--rate", type=float, default=50.0, metavar="HZ", help="output rate in sensor time")
+    g.add_argument("--imu", default="auto", choices=("auto", "highres", "raw", "scaled", "scaled2", "scaled3"),
+                   help="IMU message to navigate on (auto = the first one seen)")
+    g.add_argument("--imu-id", type=int, default=None, metavar="ID", help="id field of HIGHRES_IMU/RAW_IMU to use")
+    g.add_argument("--raw-acc-scale", type=float, default=9.80665e-3, metavar="M_S2",
+                   help="RAW_IMU accelerometer scale, m/s^2 per count (ArduPilot: 1 mG)")
+    g.add_argument("--raw-gyro-scale", type=float, default=1e-3, metavar="RAD_S",
+                   help="RAW_IMU gyro scale, rad/s per count (ArduPilot: 1 mrad/s)")
+    g.add_argument("--target-system", type=int, default=None, metavar="SYSID", help="accept IMU data only from this system")
+    g.add_argument("--config", type=Path, metavar="FILE.toml", help="TOML file with any of these options (command line wins)")
+
+
+_IMU_NAMES = {"auto": "auto", "highres": "HIGHRES_IMU", "raw": "RAW_IMU", "scaled": "SCALED_IMU",
+              "scaled2": "SCALED_IMU2", "scaled3": "SCALED_IMU3"}
+
+
+def _apply_config(args: argparse.Namespace, parser: argparse.ArgumentParser) -> None:
+    """Fill options from --config where the command line left the default."""
+    path = getattr(args, "config", None)
+    if path is None:
+        return
+    import tomllib
+
+    try:
+        doc = tomllib.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, tomllib.TOMLDecodeError) as exc:
+        parser.error(f"--config {path}: {exc}")
+    for key, value in doc.items():
+        dest = key.replace("-", "_")
+        if not hasattr(args, dest):
+            parser.error(f"--config {path}: unknown option {key!r}")
+        if getattr(args, dest) == parser.get_default(dest):
+            setattr(args, dest, value)
+
+
+def _engine_config(args: argparse.Namespace):  # type: ignore[no-untyped-def]
+    from .engine import EngineConfig
+
+    heading: float | str = args.heading
+    try:
+        heading = float(args.heading)
+    except (TypeError, ValueError):
+        pass
+    return EngineConfig(lat=args.lat, lon=args.lon, alt=args.alt, heading=heading, declination=args.declination,
+                        align=args.align, imu_rates=args.imu_rates, rate=args.rate, samples=args.samples)
+
+
+def _ingest_config(args: argparse.Namespace):  # type: ignore[no-untyped-def]
+    from .ingest import IngestConfig
+
+    return IngestConfig(message=_IMU_NAMES[args.imu], imu_id=args.imu_id, target_system=args.target_system,
+                        raw_acc_scale=args.raw_acc_scale, raw_gyro_scale=args.raw_gyro_scale)
+
+
+def _add_run(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "run",
+        help="the MAVLink INS service",
+        description="Connect to a MAVLink stream, align on the IMU, navigate on sensor time and publish "
+        "ATTITUDE, ATTITUDE_QUATERNION, LOCAL_POSITION_NED, GLOBAL_POSITION_INT, ODOMETRY and HEARTBEAT. "
+        "Stops cleanly on Ctrl-C or SIGTERM.",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    p.add_argument("--master", default="udpin:127.0.0.1:14551", metavar="URL",
+                   help="pymavlink connection string to read (udpin:/udpout:/tcp:/serial device)")
+    p.add_argument("--out", action="append", default=[], metavar="URL", help="extra output link (repeatable)")
+    p.add_argument("--sysid", type=int, default=None, help="our system id (default: the vehicle's)")
+    p.add_argument("--compid", type=int, default=191, help="our component id (191 = onboard computer)")
+    p.add_argument("--geoid-height", type=float, default=0.0, metavar="M",
+                   help="geoid undulation: GLOBAL_POSITION_INT alt = ellipsoidal height - this")
+    p.add_argument("--tlog", type=Path, metavar="FILE", help="record every received message (replayable)")
+    p.add_argument("-o", "--output", type=Path, metavar="NAV.csv", help="also write each output set as a solution row")
+    p.add_argument("--request-imu", type=float, metavar="HZ", help="ask the autopilot for HIGHRES_IMU at HZ")
+    p.add_argument("--rerun", type=Path, metavar="FILE.rrd", help="record to a Rerun file")
+    p.add_argument("--rerun-serve", action="store_true", help="serve the recording for a live Rerun viewer")
+    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds of wall time")
+    p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    _nav_options(p)
+    p.set_defaults(func=_cmd_run, parser=p)
+
+
+def _setup_logging(verbose: bool) -> None:
+    import logging
+
+    logging.basicConfig(level=logging.DEBUG if verbose else logging.INFO, format="%(asctime)s %(levelname)s %(message)s")
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    import signal
+    import threading
+
+    _apply_config(args, args.parser)
+    _setup_logging(args.verbose)
+    from .publish import PublishConfig
+    from .service import Service, ServiceConfig
+
+    try:
+        engine_cfg = _engine_config(args)
+    except ValueError as exc:
+        print(f"mavins run: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    cfg = ServiceConfig(master=args.master, outs=args.out, sysid=args.sysid, compid=args.compid, tlog=args.tlog,
+                        solution=args.output, request_imu=args.request_imu,
+                        publish=PublishConfig(geoid_height=args.geoid_height))
+    try:
+        svc = Service(engine_cfg, _ingest_config(args), cfg)
+    except OSError as exc:
+        print(f"mavins run: error: cannot open {args.master}: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    if args.rerun or args.rerun_serve:
+        from .record import Recorder
+
+        svc.attach_recorder(Recorder(args.rerun, serve=args.rerun_serve, app="mavins"))
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    if args.duration:
+        threading.Timer(args.duration, stop.set).start()
+    print(f"mavins run: listening on {args.master}", file=sys.stderr)
+    summary = svc.run(stop)
+    for line in summary.lines():
+        print(f"mavins run: {line}", file=sys.stderr)
+    return 0
+
+
+def _add_replay(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "replay",
+        help="run the service pipeline over a log (.tlog, ArduPilot .bin, PX4 .ulg)",
+        description="Replay a recorded log through the same pipeline as 'mavins run', as fast as possible, "
+        "writing each output set as a solution row (same results as live).",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    p.add_argument("log", type=Path, metavar="LOG", help=".tlog, .bin or .ulg")
+    p.add_argument("-o", "--output", type=Path, required=True, metavar="NAV.csv", help="solution CSV to write")
+    p.add_argument("--rerun", type=Path, metavar="FILE.rrd", help="also write a Rerun recording")
+    _nav_options(p)
+    p.set_defaults(func=_cmd_replay, parser=p)
+
+
+def _cmd_replay(args: argparse.Namespace) -> int:
+    _apply_config(args, args.parser)
+    from .files import DataFileError
+    from .replay import replay
+
+    try:
+        engine_cfg = _engine_config(args)
+        recorder = None
+        if args.rerun:
+            from .record import Recorder
+
+            recorder = Recorder(args.rerun, serve=False, app="mavins-replay")
+        res = replay(args.log, engine_cfg, _ingest_config(args), args.output, recorder=recorder)
+    except (DataFileError, ValueError) as exc:
+        print(f"mavins replay: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    eng = res.pipeline.engine
+    print(f"mavins replay: {res.messages} messages, {res.outputs} solution rows to {args.output}; "
+          f"final state {eng.state.value}" + (f", heading from {eng.heading_used}" if eng.heading_used else ""),
+          file=sys.stderr)
+    return 0
+
+
+def _add_demo(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "demo",
+        help="loopback simulation: simulator -> UDP -> service -> UDP, recorded to Rerun",
+        description="Stream a built-in scenario from the simulator over UDP into the service, collect what it "
+        "publishes, record everything to Rerun and print the errors against the simulator's truth.",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    p.add_argument("--scenario", default="flight", help="built-in scenario or .toml path")
+    p.add_argument("--duration", type=float, default=120.0, metavar="S", help="simulated seconds")
+    p.add_argument("--speed", default="10", metavar="X|max", help="pace: 1 = real time")
+    p.add_argument("--grade", default="industrial", choices=("ideal", "consumer", "industrial", "tactical", "navigation"))
+    p.add_argument("--heading", default="vehicle", help="heading source for the alignment")
+    p.add_argument("--rerun", type=Path, default=Path("mavins-demo.rrd"), metavar="FILE.rrd", help="recording to write")
+    p.add_argument("--rerun-serve", action="store_true", help="also serve the recording to a live viewer")
+    p.add_argument("--no-rerun", action="store_true", help="do not record")
+    p.add_argument("--seed", type=int, default=0)
+    p.set_defaults(func=_cmd_demo)
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    import threading
+
+    _setup_logging(False)
+    from .demo import run_demo
+
+    speed = None if args.speed == "max" else float(args.speed)
+    stop = threading.Event()
+    try:
+        report = run_demo(args.scenario, args.duration, speed, args.grade, args.heading,
+                          None if args.no_rerun else args.rerun, args.rerun_serve, args.seed, stop)
+    except KeyboardInterrupt:
+        stop.set()
+        print("mavins demo: interrupted", file=sys.stderr)
+        return 130
+    for line in report.lines():
+        print(f"mavins demo: {line}")
+    if not args.no_rerun:
+        print(f"mavins demo: recording written to {args.rerun} (open it with: rerun {args.rerun})")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The full ``mavins`` parser with every subcommand."""
     parser = argparse.ArgumentParser(
@@ -222,7 +441,7 @@ def _version() -> str:
         return "unknown"
 
 
-_EXTRA_COMMANDS: list[Callable[[argparse._SubParsersAction], None]] = [_add_sim]
+_EXTRA_COMMANDS: list[Callable[[argparse._SubParsersAction], None]] = [_add_sim, _add_run, _add_replay, _add_demo]
 
 
 def main(argv: Sequence[str] | None = None) -> int:

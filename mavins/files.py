@@ -11,6 +11,7 @@ import csv
 import io
 import json
 import math
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -53,8 +54,42 @@ def _open_text(path: Path) -> io.TextIOBase:
     return open(path, encoding="utf-8", newline="")
 
 
+def _file_line(path: Path, data_row: int) -> int:
+    """File line number (1-based) of a data row, counting the blank lines numpy skips."""
+    with _open_text(path) as fh:
+        next(fh)
+        seen = -1
+        for lineno, line in enumerate(fh, start=2):
+            if line.strip():
+                seen += 1
+                if seen == data_row:
+                    return lineno
+    return data_row + 2
+
+
 def _locate_bad_cell(path: Path, header: list[str], wanted: tuple[str, ...]) -> str:
     """Slow second pass that finds the first cell which is not a number."""
+    try:
+        return _scan_cells(path, header, wanted)
+    except UnicodeDecodeError:
+        return _bad_text(path)
+
+
+def _bad_text(path: Path) -> str:
+    """Message naming the first line that is not UTF-8."""
+    import gzip
+
+    opener = gzip.open if path.suffix == ".gz" else open
+    with opener(path, "rb") as fh:
+        for lineno, raw in enumerate(fh, start=1):
+            try:
+                raw.decode("utf-8")
+            except UnicodeDecodeError as exc:
+                return f"{path}: line {lineno}: not UTF-8 text ({exc.reason} at column {exc.start + 1})"
+    return f"{path}: not UTF-8 text"
+
+
+def _scan_cells(path: Path, header: list[str], wanted: tuple[str, ...]) -> str:
     idx = {name: header.index(name) for name in wanted}
     with _open_text(path) as fh:
         reader = csv.reader(fh)
@@ -94,16 +129,20 @@ def read_table(path: str | Path, columns: tuple[str, ...], *, strictly_increasin
         )
     usecols = [header.index(c) for c in columns]
     try:
-        data = np.loadtxt(path, delimiter=",", skiprows=1, usecols=usecols, ndmin=2, dtype=np.float64)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # "input contained no data": reported below
+            data = np.loadtxt(path, delimiter=",", skiprows=1, usecols=usecols, ndmin=2, dtype=np.float64)
     except (ValueError, IndexError):
         raise DataFileError(_locate_bad_cell(path, header, columns)) from None
+    except UnicodeDecodeError:
+        raise DataFileError(_bad_text(path)) from None
     if data.shape[0] == 0:
         raise DataFileError(f"{path}: no data rows")
     bad = ~np.isfinite(data)
     if bad.any():
         i, j = np.argwhere(bad)[0]
         raise DataFileError(
-            f"{path}: line {i + 2}, column '{columns[j]}': value {data[i, j]!r} is not finite"
+            f"{path}: line {_file_line(path, i)}, column '{columns[j]}': value {float(data[i, j])!r} is not finite"
         )
     if strictly_increasing and data.shape[0] > 1:
         steps = np.diff(data[:, 0])
@@ -111,8 +150,8 @@ def read_table(path: str | Path, columns: tuple[str, ...], *, strictly_increasin
         if nonpos.size:
             i = nonpos[0] + 1
             raise DataFileError(
-                f"{path}: line {i + 2}, column 't': time {data[i, 0]!r} does not increase "
-                f"(previous row has {data[i - 1, 0]!r})"
+                f"{path}: line {_file_line(path, i)}, column 't': time {float(data[i, 0])!r} does not increase "
+                f"(previous row has {float(data[i - 1, 0])!r})"
             )
     return data
 
@@ -124,6 +163,8 @@ def read_init(path: str | Path) -> InitialState:
         raise DataFileError(f"{path}: no such file")
     try:
         doc = json.loads(path.read_text(encoding="utf-8"))
+    except UnicodeDecodeError:
+        raise DataFileError(_bad_text(path)) from None
     except json.JSONDecodeError as exc:
         raise DataFileError(f"{path}: line {exc.lineno}, column {exc.colno}: invalid JSON: {exc.msg}") from None
     if not isinstance(doc, dict):
@@ -165,3 +206,23 @@ def write_table(path: str | Path, columns: tuple[str, ...], data: np.ndarray) ->
 def read_solution(path: str | Path) -> np.ndarray:
     """Read a solution or truth CSV (degrees as in the file)."""
     return read_table(path, SOLUTION_COLUMNS)
+
+
+class SolutionWriter:
+    """Write solution rows (kernel radians) to a solution CSV as they come."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._fh = open(self.path, "w", encoding="utf-8", newline="")
+        self._fh.write(",".join(SOLUTION_COLUMNS) + "\n")
+        self.rows = 0
+
+    def write(self, row_rad: np.ndarray) -> None:
+        r = row_rad.copy()
+        r[[1, 2, 7, 8, 9]] = np.degrees(r[[1, 2, 7, 8, 9]])
+        self._fh.write(",".join(map(repr, r.tolist())) + "\n")
+        self.rows += 1
+
+    def close(self) -> None:
+        self._fh.close()

@@ -65,8 +65,11 @@ def run_nav(imu_path: Path, init_path: Path, out_path: Path, opts: NavOptions) -
         imu_rates=opts.imu_rates,
     )
     t_compute = time.perf_counter()
-    out_path.parent.mkdir(parents=True, exist_ok=True)
-    files.write_table(out_path, files.SOLUTION_COLUMNS, sol)
+    try:
+        out_path.parent.mkdir(parents=True, exist_ok=True)
+        files.write_table(out_path, files.SOLUTION_COLUMNS, sol)
+    except OSError as exc:
+        raise files.DataFileError(f"{out_path}: cannot write: {exc.strerror or exc}") from None
     t_write = time.perf_counter()
     if opts.timing:
         print(

@@ -385,6 +385,7 @@ class SimResult:
     dtheta: np.ndarray
     dv: np.ndarray
     truth: np.ndarray
+    spec: MotionSpec
 
     TRUTH_COLUMNS = ("t", "lat", "lon", "h", "vn", "ve", "vd", "roll", "pitch", "yaw", "qw", "qx", "qy", "qz",
                      "veh_roll", "veh_pitch", "veh_yaw", "tt1", "tt2")
@@ -406,7 +407,8 @@ def simulate(traj: Trajectory | MotionSpec, rate: float, duration: float | None 
     t_end = spec.t_end if duration is None else spec.t0 + duration
     dt = 1.0 / rate
     n = int(math.floor((t_end - spec.t0) / dt + 1e-9))
-    t = spec.t0 + dt * np.arange(1, n + 1)
+    # Sample times on whole microseconds, so MAVLink's time_usec carries them exactly.
+    t = spec.t0 + np.round(np.arange(1, n + 1) * (1e6 / rate)) / 1e6
     if substeps is None:
         substeps = max(1, math.ceil(2 * math.pi * spec.max_freq * dt / 0.5), math.ceil(dt / 0.01))
     dtheta = np.empty((n, 3))
@@ -447,4 +449,17 @@ def simulate(traj: Trajectory | MotionSpec, rate: float, duration: float | None 
     truth[:, 14:17] = np.degrees(np.array([quat_to_euler(qi) for qi in rows[:, 7:11]]))
     truth[:, 17] = np.degrees(rows[:, 11])
     truth[:, 18] = np.degrees(rows[:, 12])
-    return SimResult(spec.t0, t, dtheta, dv, truth)
+    return SimResult(spec.t0, t, dtheta, dv, truth, spec)
+
+
+def instant_rates(res: SimResult) -> tuple[np.ndarray, np.ndarray]:
+    """True instantaneous ``w_is^s`` (rad/s) and ``f^s`` (m/s^2) at every sample time."""
+    sp = res.spec
+    w = np.empty((len(res.t), 3))
+    f = np.empty((len(res.t), 3))
+    lat = np.radians(res.truth[1:, 1])
+    h = res.truth[1:, 3]
+    for i, ti in enumerate(res.t):
+        w[i], f[i] = kin.imu_rates(float(ti), float(lat[i]), float(h[i]), sp.starts, sp.durs, sp.coefs, sp.counts,
+                                   sp.vib, sp.consts, sp.linvib, sp.use_earth)
+    return w, f

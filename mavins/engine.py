@@ -1,0 +1,216 @@
+"""The navigation engine: IMU samples in, output sets out, on sensor time only.
+
+States (announced as events): WAITING (no initial position yet) ->
+ALIGNING (static coarse alignment over ``align`` seconds of sensor time) ->
+NAVIGATING (strapdown kernel fed sample by sample). The same engine runs
+live, in replay and in the demo, so identical input gives bit-identical output.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from dataclasses import dataclass, field
+from enum import Enum
+
+import numpy as np
+
+from .core import align, earth
+from .core import strapdown as sd
+from .ingest import ImuSample
+
+
+class State(str, Enum):
+    WAITING = "WAITING"
+    ALIGNING = "ALIGNING"
+    NAVIGATING = "NAVIGATING"
+
+
+HEADING_WORDS = ("auto", "gyrocompass", "mag", "vehicle")
+
+
+@dataclass
+class EngineConfig:
+    """Navigation settings (CONVENTIONS.md ``mavins run``); angles in degrees."""
+
+    lat: float | None = None
+    lon: float | None = None
+    alt: float | None = None
+    heading: float | str = "auto"
+    declination: float = 0.0
+    align: float = 10.0
+    imu_rates: str = "averaged"
+    rate: float = 50.0
+    samples: int = 2
+    attitude: str = "quaternion"
+    order: str = "exact"
+    earth_model: str = "wgs84"
+    vertical: str = "free"
+    motion_gyro: float = 0.1  # rad/s: a sample above this restarts the alignment
+    motion_accel: float = 1.5  # m/s^2: |f| - g beyond this restarts the alignment
+    max_gap: float = 1.0  # s: a longer gap in sensor time degrades the solution
+
+
+@dataclass
+class Output:
+    """One output set: the solution row (radians, CONVENTIONS.md columns) and the latest body rate."""
+
+    row: np.ndarray
+    gyro: np.ndarray
+    origin: tuple[float, float, float]
+    degraded: bool
+
+
+@dataclass
+class Engine:
+    """Stateful shell around the strapdown kernel."""
+
+    cfg: EngineConfig
+    state: State = State.WAITING
+    events: list[tuple[str, str]] = field(default_factory=list)
+    counters: Counter = field(default_factory=Counter)
+    heading_used: str = ""
+    degraded: bool = False
+    _kcfg: np.ndarray = field(init=False)
+    _s: np.ndarray | None = field(init=False, default=None)
+    _pos: tuple[float, float, float] | None = field(init=False, default=None)
+    _vehicle_yaw: float | None = field(init=False, default=None)
+    _acc: list[np.ndarray] = field(init=False, default_factory=list)
+    _t_align0: float = field(init=False, default=0.0)
+    _last_out: int = field(init=False, default=-1)
+    _last_t: float | None = field(init=False, default=None)
+    _gyro: np.ndarray = field(init=False, default_factory=lambda: np.zeros(3))
+    _row: np.ndarray = field(init=False, default_factory=lambda: np.zeros(sd.OUT_SIZE))
+
+    def __post_init__(self) -> None:
+        h = self.cfg.heading
+        if isinstance(h, str) and h not in HEADING_WORDS:
+            raise ValueError(f"heading must be degrees or one of {', '.join(HEADING_WORDS)}, got {h!r}")
+        self._kcfg = sd.make_config(
+            samples=self.cfg.samples, attitude=self.cfg.attitude, order=self.cfg.order,
+            earth_model=self.cfg.earth_model, vertical=self.cfg.vertical, imu_rates=self.cfg.imu_rates,
+        )
+        if None not in (self.cfg.lat, self.cfg.lon, self.cfg.alt):
+            self.set_position(float(self.cfg.lat), float(self.cfg.lon), float(self.cfg.alt), "options")  # type: ignore[arg-type]
+
+    # -- inputs besides the IMU ------------------------------------------------
+    def set_position(self, lat: float, lon: float, alt: float, source: str) -> None:
+        """Initial position (deg, deg, ellipsoidal m), used at the next alignment."""
+        if self._pos is None:
+            self._pos = (lat, lon, alt)
+            self._event("INFO", f"initial position from {source}: {lat:.7f}, {lon:.7f}, {alt:.1f} m")
+
+    def set_vehicle_yaw(self, yaw_rad: float) -> None:
+        """The vehicle's own heading (from its ATTITUDE), a heading source for alignment."""
+        self._vehicle_yaw = yaw_rad
+
+    @property
+    def position_known(self) -> bool:
+        return self._pos is not None
+
+    # -- the IMU ---------------------------------------------------------------
+    def restart(self, reason: str) -> None:
+        """Back to alignment (autopilot restart, sensor time reset)."""
+        self._s = None
+        self._acc.clear()
+        self._last_t = None
+        self._last_out = -1
+        self.counters["restarts"] += 1
+        self._set_state(State.WAITING if self._pos is None else State.ALIGNING, reason)
+
+    def on_imu(self, smp: ImuSample) -> Output | None:
+        """Feed one accepted sample; returns an output set when one is due."""
+        if self._last_t is not None:
+            gap = smp.t - self._last_t
+            if gap > self.cfg.max_gap:
+                self.counters["gaps_long"] += 1
+                if self.state is State.NAVIGATING and not self.degraded:
+                    self.degraded = True
+                    self._event("WARNING", f"sensor-time gap of {gap:.3f} s: solution degraded")
+        self._last_t = smp.t
+        if self.state is State.WAITING:
+            if self._pos is None:
+                return None
+            self._set_state(State.ALIGNING, "initial position known")
+        if self.state is State.ALIGNING:
+            self._align_step(smp)
+            return None
+        return self._nav_step(smp)
+
+    def _align_step(self, smp: ImuSample) -> None:
+        g = np.asarray(smp.gyro)
+        f = np.asarray(smp.accel)
+        if not self._acc:
+            self._t_align0 = smp.t
+        lat, _, alt = self._pos  # type: ignore[misc]
+        g_ref = earth.gravity(math.radians(lat), alt)
+        if np.linalg.norm(g) > self.cfg.motion_gyro or abs(np.linalg.norm(f) - g_ref) > self.cfg.motion_accel:
+            self.counters["align_restarts"] += 1
+            if self._acc:
+                self._event("WARNING", "motion during alignment: restarting it")
+            self._acc.clear()
+            return
+        mag = np.asarray(smp.mag) if smp.mag is not None else np.full(3, np.nan)
+        self._acc.append(np.concatenate([g, f, mag]))
+        if smp.t - self._t_align0 >= self.cfg.align:
+            self._finish_alignment(smp)
+
+    def _finish_alignment(self, smp: ImuSample) -> None:
+        data = np.array(self._acc)
+        w_mean, f_mean, m_mean = data[:, 0:3].mean(0), data[:, 3:6].mean(0), data[:, 6:9].mean(0)
+        roll, pitch = align.level(f_mean)
+        yaw, source = self._heading(w_mean, m_mean, roll, pitch)
+        lat, lon, alt = self._pos  # type: ignore[misc]
+        self._s = sd.init_state(smp.t, math.radians(lat), math.radians(lon), alt, np.zeros(3), roll, pitch, yaw)
+        self.heading_used = source
+        self._acc.clear()
+        self.degraded = False
+        self._set_state(
+            State.NAVIGATING,
+            f"aligned over {smp.t - self._t_align0:.1f} s: roll {math.degrees(roll):.2f} pitch "
+            f"{math.degrees(pitch):.2f} heading {math.degrees(yaw):.2f} deg from {source}",
+        )
+        if self.cfg.imu_rates == "sampled":
+            sd.push_rate(self._s, self._kcfg, smp.t, np.asarray(smp.gyro), np.asarray(smp.accel))
+
+    def _heading(self, w_mean: np.ndarray, m_mean: np.ndarray, roll: float, pitch: float) -> tuple[float, str]:
+        h = self.cfg.heading
+        if not isinstance(h, str):
+            return math.radians(float(h)), "--heading"
+        has_mag = bool(np.all(np.isfinite(m_mean)) and np.linalg.norm(m_mean) > 0)
+        if h == "vehicle" or (h == "auto" and self._vehicle_yaw is not None):
+            if self._vehicle_yaw is None:
+                self._event("WARNING", "no vehicle ATTITUDE seen: heading from gyrocompass")
+            else:
+                return self._vehicle_yaw, "vehicle ATTITUDE"
+        if h == "mag" or (h == "auto" and has_mag):
+            if has_mag:
+                return align.mag_heading(m_mean, roll, pitch, math.radians(self.cfg.declination)), "magnetometer"
+            self._event("WARNING", "no magnetometer data: heading from gyrocompass")
+        return align.gyrocompass(w_mean, roll, pitch), "gyrocompass"
+
+    def _nav_step(self, smp: ImuSample) -> Output | None:
+        self._gyro = np.asarray(smp.gyro)
+        r = sd.push_rate(self._s, self._kcfg, smp.t, self._gyro, np.asarray(smp.accel))  # type: ignore[arg-type]
+        if r != 1:
+            return None
+        t_sol = self._s[sd.S_T]  # type: ignore[index]
+        k = math.floor(t_sol * self.cfg.rate + 1e-9)
+        if k <= self._last_out:
+            return None
+        self._last_out = k
+        sd.solution_row(self._s, self._kcfg, self._row)  # type: ignore[arg-type]
+        return Output(self._row.copy(), self._gyro.copy(), self._pos, self.degraded)  # type: ignore[arg-type]
+
+    # -- events ----------------------------------------------------------------
+    def _set_state(self, state: State, why: str) -> None:
+        if state is not self.state:
+            self.state = state
+            self._event("INFO", f"{state.value}: {why}")
+
+    def _event(self, level: str, text: str) -> None:
+        self.events.append((level, text))
+
+    def take_events(self) -> list[tuple[str, str]]:
+        ev, self.events = self.events, []
+        return ev

@@ -1,0 +1,108 @@
+"""Output sets to MAVLink messages (CONVENTIONS.md "MAVLink" outputs).
+
+Every message is stamped with the sensor time of the solution it carries
+(``time_boot_ms = time_usec // 1000``). LOCAL_POSITION_NED and ODOMETRY use
+the initial position as origin (exact ECEF difference rotated into the
+origin's NED frame). GLOBAL_POSITION_INT's ``alt`` is AMSL: ellipsoidal height
+minus the configured constant geoid height.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .core import earth
+from .core.rotation import quat_to_dcm
+from .engine import Output
+from .mavlink import mavlink
+
+NAN21 = [float("nan")] * 21
+
+
+@dataclass(frozen=True)
+class PublishConfig:
+    """Identity and frames of what is published."""
+
+    geoid_height: float = 0.0
+    odometry_frame: int = mavlink.MAV_FRAME_LOCAL_FRD
+    estimator_type: int = mavlink.MAV_ESTIMATOR_TYPE_UNKNOWN
+
+
+def local_ned(lat: float, lon: float, h: float, origin: tuple[float, float, float]) -> np.ndarray:
+    """NED offset (m) of a point (rad, rad, m) from the origin (deg, deg, m)."""
+    lat0, lon0, h0 = math.radians(origin[0]), math.radians(origin[1]), origin[2]
+    d = earth.lla_to_ecef(lat, lon, h) - earth.lla_to_ecef(lat0, lon0, h0)
+    return earth.cne_from_latlon(lat0, lon0).T @ d
+
+
+def encode(mav: mavlink.MAVLink, out: Output, cfg: PublishConfig, reset_counter: int = 0) -> list[mavlink.MAVLink_message]:
+    """ATTITUDE, ATTITUDE_QUATERNION, LOCAL_POSITION_NED, GLOBAL_POSITION_INT and ODOMETRY."""
+    r = out.row
+    t = float(r[0])
+    usec = int(round(t * 1e6))
+    ms = (usec // 1000) % (2**32)
+    lat, lon, h = float(r[1]), float(r[2]), float(r[3])
+    vn, ve, vd = float(r[4]), float(r[5]), float(r[6])
+    roll, pitch, yaw = float(r[7]), float(r[8]), float(r[9])
+    q = [float(x) for x in r[10:14]]
+    p, qr, rr = (float(x) for x in out.gyro)
+    ned = local_ned(lat, lon, h, out.origin)
+    v_body = quat_to_dcm(np.asarray(q)).T @ np.array([vn, ve, vd])
+    hdg = int(round(math.degrees(yaw) * 100)) % 36000
+    return [
+        mav.attitude_encode(ms, roll, pitch, yaw, p, qr, rr),
+        mav.attitude_quaternion_encode(ms, q[0], q[1], q[2], q[3], p, qr, rr, [0.0, 0.0, 0.0, 0.0]),
+        mav.local_position_ned_encode(ms, float(ned[0]), float(ned[1]), float(ned[2]), vn, ve, vd),
+        mav.global_position_int_encode(
+            ms,
+            int(round(math.degrees(lat) * 1e7)),
+            int(round(math.degrees(lon) * 1e7)),
+            int(round((h - cfg.geoid_height) * 1000)),
+            int(round((h - out.origin[2]) * 1000)),
+            _cms(vn),
+            _cms(ve),
+            _cms(vd),
+            hdg,
+        ),
+        mav.odometry_encode(
+            usec,
+            cfg.odometry_frame,
+            mavlink.MAV_FRAME_BODY_FRD,
+            float(ned[0]),
+            float(ned[1]),
+            float(ned[2]),
+            q,
+            float(v_body[0]),
+            float(v_body[1]),
+            float(v_body[2]),
+            p,
+            qr,
+            rr,
+            NAN21,
+            NAN21,
+            reset_counter % 256,
+            cfg.estimator_type,
+            0,
+        ),
+    ]
+
+
+def _cms(v: float) -> int:
+    """m/s to int16 cm/s, saturated."""
+    return max(-32768, min(32767, int(round(v * 100))))
+
+
+def heartbeat(mav: mavlink.MAVLink, navigating: bool) -> mavlink.MAVLink_message:
+    """HEARTBEAT of an onboard controller with no autopilot of its own."""
+    status = mavlink.MAV_STATE_ACTIVE if navigating else mavlink.MAV_STATE_STANDBY
+    return mav.heartbeat_encode(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, status)
+
+
+def statustext(mav: mavlink.MAVLink, level: str, text: str) -> mavlink.MAVLink_message:
+    """STATUSTEXT with a MAV_SEVERITY from an event level (text cut to 50 bytes)."""
+    sev = {"INFO": mavlink.MAV_SEVERITY_INFO, "WARNING": mavlink.MAV_SEVERITY_WARNING,
+           "ERROR": mavlink.MAV_SEVERITY_ERROR}.get(level, mavlink.MAV_SEVERITY_NOTICE)
+    return mav.statustext_encode(sev, ("mavins: " + text).encode("utf-8")[:50])

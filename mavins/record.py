@@ -1,0 +1,261 @@
+"""Rerun recording of everything the service sees and computes.
+
+Layout (entity paths, units in the series names):
+
+* ``/world`` NED (right-handed, Z down) at the initial position:
+  ``/world/vehicle`` pose (Rerun quaternions are xyzw: converted here only),
+  with body axes and a body box; ``/world/trajectory/estimated`` and
+  ``/world/trajectory/truth`` (decimated line strips).
+* ``/plots/attitude`` roll, pitch, yaw (deg); ``/plots/velocity`` vn, ve, vd
+  (m/s); ``/plots/position`` north, east, down (m) and ``/plots/height`` (m).
+* ``/imu/gyro`` (rad/s) and ``/imu/accel`` (m/s^2), every sample.
+* ``/errors/attitude`` (deg), ``/errors/position`` (m), ``/errors/velocity``
+  (m/s): only where truth exists at the output's sensor time.
+* ``/health/*``: sample interval (ms), rejected samples by reason, state,
+  output rate (Hz); ``/log`` text log of state changes and warnings.
+
+Timelines: ``sensor_time`` (duration) everywhere; ``wall_time`` on live runs.
+Rows are buffered and sent with ``send_columns`` (columnar) every
+``FLUSH_ROWS`` rows, so memory stays bounded on long runs; the trajectory
+strip keeps at most ``TRAJ_POINTS`` points, halving its density when full.
+"""
+
+from __future__ import annotations
+
+import math
+import socket
+import time
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+FLUSH_ROWS = 512
+TRAJ_POINTS = 2000
+TRAJ_EVERY_S = 2.0
+
+COLORS = {
+    "x": [230, 60, 60],
+    "y": [60, 170, 60],
+    "z": [60, 90, 230],
+    "estimated": [0, 170, 255],
+    "truth": [255, 160, 0],
+}
+XYZ = [COLORS["x"], COLORS["y"], COLORS["z"]]
+
+
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def blueprint():  # type: ignore[no-untyped-def]
+    """The default layout: 3D and attitude first, errors, IMU, health and log."""
+    import rerun.blueprint as rrb
+
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Vertical(
+                rrb.Spatial3DView(origin="/world", name="3D (NED)"),
+                rrb.TextLogView(origin="/log", name="Log"),
+                row_shares=[4, 1],
+            ),
+            rrb.Vertical(
+                rrb.TimeSeriesView(origin="/plots/attitude", name="Attitude (deg)"),
+                rrb.TimeSeriesView(origin="/errors", name="Errors vs truth"),
+                rrb.TimeSeriesView(origin="/plots/velocity", name="Velocity NED (m/s)"),
+                rrb.TimeSeriesView(origin="/plots/position", name="Position from origin (m)"),
+            ),
+            rrb.Vertical(
+                rrb.TimeSeriesView(origin="/imu/gyro", name="Gyro (rad/s)"),
+                rrb.TimeSeriesView(origin="/imu/accel", name="Accel (m/s^2)"),
+                rrb.TimeSeriesView(origin="/health", name="Health"),
+            ),
+            column_shares=[3, 3, 2],
+        ),
+        rrb.TimePanel(timeline="sensor_time", expanded=False),
+    )
+
+
+class Recorder:
+    """Buffers rows per entity and sends them as columns; never blocks on a viewer."""
+
+    def __init__(self, path: Path | None, serve: bool = False, app: str = "mavins", live: bool = True) -> None:
+        import rerun as rr
+
+        self.rr = rr
+        self.rec = rr.RecordingStream(app)
+        sinks = []
+        if path is not None:
+            Path(path).parent.mkdir(parents=True, exist_ok=True)
+            sinks.append(rr.FileSink(str(path)))
+        self.url: str | None = None
+        if serve:
+            server = rr.GrpcServerSink(bind_ip="127.0.0.1", port=_free_port(), server_memory_limit="512MiB")
+            self.url = server.uri
+            sinks.append(server)
+        if not sinks:
+            raise ValueError("a recorder needs a file or --rerun-serve")
+        self.rec.set_sinks(*sinks)
+        self.rec.set_log_time_enabled(False)
+        self.rec.send_blueprint(blueprint(), make_active=True, make_default=True)
+        self.live = live
+        self._buf: dict[str, list[tuple[float, float, list[float]]]] = defaultdict(list)
+        self._traj: list[list[float]] = []
+        self._traj_stride = 1
+        self._traj_n = 0
+        self._traj_last = -math.inf
+        self._truth_t: np.ndarray | None = None
+        self._truth: np.ndarray | None = None
+        self._last_sample_t: float | None = None
+        self._last_out_t: float | None = None
+        self._static_done = False
+        self.rows = defaultdict(int)
+        self._log_static()
+
+    # -- static content --------------------------------------------------------
+    def _log_static(self) -> None:
+        rr = self.rr
+        self.rec.log("/world", rr.ViewCoordinates.RIGHT_HAND_Z_DOWN, static=True)
+        self.rec.log("/world/vehicle/axes", rr.Arrows3D(vectors=[[2, 0, 0], [0, 2, 0], [0, 0, 2]], colors=XYZ,
+                                                        labels=["forward", "right", "down"]), static=True)
+        self.rec.log("/world/vehicle/body", rr.Boxes3D(half_sizes=[[0.6, 0.4, 0.12]], colors=[[200, 200, 200]]),
+                     static=True)
+        series = {
+            "/plots/attitude": (["roll", "pitch", "yaw"], XYZ),
+            "/plots/velocity": (["vn", "ve", "vd"], XYZ),
+            "/plots/position": (["north", "east", "down"], XYZ),
+            "/plots/height": (["height"], [COLORS["estimated"]]),
+            "/imu/gyro": (["gyro x", "gyro y", "gyro z"], XYZ),
+            "/imu/accel": (["accel x", "accel y", "accel z"], XYZ),
+            "/errors/attitude": (["attitude error (deg)"], [COLORS["x"]]),
+            "/errors/position": (["horizontal position error (m)"], [COLORS["y"]]),
+            "/errors/velocity": (["velocity error (m/s)"], [COLORS["z"]]),
+            "/health/sample_interval": (["sample interval (ms)"], [[150, 150, 150]]),
+            "/health/output_rate": (["output rate (Hz)"], [[100, 200, 200]]),
+        }
+        for path, (names, colors) in series.items():
+            self.rec.log(path, rr.SeriesLines(names=names, colors=colors), static=True)
+
+    def log_truth(self, truth: np.ndarray) -> None:
+        """Truth rows (sim file units: t, lat, lon, h, vn, ve, vd, roll, pitch, yaw, q...) for errors and the 3D view."""
+        self._truth = np.asarray(truth)
+        self._truth_t = self._truth[:, 0]
+
+    # -- per-sample and per-output ----------------------------------------------
+    def _push(self, path: str, t: float, values: list[float]) -> None:
+        buf = self._buf[path]
+        buf.append((t, time.time(), values))
+        if len(buf) >= FLUSH_ROWS:
+            self._flush(path)
+
+    def on_sample(self, t: float, gyro: tuple[float, float, float], accel: tuple[float, float, float]) -> None:
+        """A raw IMU sample (sensor time s, rad/s, m/s^2)."""
+        self._push("/imu/gyro", t, list(gyro))
+        self._push("/imu/accel", t, list(accel))
+        if self._last_sample_t is not None:
+            self._push("/health/sample_interval", t, [1e3 * (t - self._last_sample_t)])
+        self._last_sample_t = t
+
+    def on_output(self, row: np.ndarray, origin: tuple[float, float, float], ned: np.ndarray) -> None:
+        """An output set: kernel row (radians), origin (deg, m), NED offset (m)."""
+        t = float(row[0])
+        if not self._static_done and self._truth is not None:
+            self._log_truth_strip(origin)
+        self._static_done = True
+        self._push("/plots/attitude", t, [math.degrees(float(x)) for x in row[7:10]])
+        self._push("/plots/velocity", t, [float(x) for x in row[4:7]])
+        self._push("/plots/position", t, [float(x) for x in ned])
+        self._push("/plots/height", t, [float(row[3])])
+        q = row[10:14]
+        self._push("/world/vehicle", t, [float(ned[0]), float(ned[1]), float(ned[2]),
+                                         float(q[1]), float(q[2]), float(q[3]), float(q[0])])
+        if self._last_out_t is not None and t > self._last_out_t:
+            self._push("/health/output_rate", t, [1.0 / (t - self._last_out_t)])
+        self._last_out_t = t
+        self._errors(t, row)
+        self._trajectory(t, ned)
+
+    def _errors(self, t: float, row: np.ndarray) -> None:
+        if self._truth_t is None:
+            return
+        i = int(np.searchsorted(self._truth_t, t - 1e-7))
+        if i >= len(self._truth_t) or abs(self._truth_t[i] - t) > 1e-6:
+            return
+        tr = self._truth[i]  # type: ignore[index]
+        q_est = row[10:14]
+        q_tru = tr[10:14]
+        d = abs(float(np.dot(q_est, q_tru)))
+        att = math.degrees(2 * math.acos(min(d, 1.0)))
+        lat = math.radians(tr[1])
+        from .core import earth
+
+        r_n, r_e = earth.radii(lat)
+        dn = (float(row[1]) - lat) * r_n
+        de = (float(row[2]) - math.radians(tr[2])) * r_e * math.cos(lat)
+        self._push("/errors/attitude", t, [att])
+        self._push("/errors/position", t, [math.hypot(dn, de)])
+        self._push("/errors/velocity", t, [float(np.linalg.norm(row[4:7] - tr[4:7]))])
+
+    def _log_truth_strip(self, origin: tuple[float, float, float]) -> None:
+        from .publish import local_ned
+
+        tr = self._truth  # type: ignore[assignment]
+        step = max(1, len(tr) // TRAJ_POINTS)
+        pts = [local_ned(math.radians(r[1]), math.radians(r[2]), r[3], origin) for r in tr[::step]]
+        self.rec.log("/world/trajectory/truth", self.rr.LineStrips3D([np.array(pts)], colors=[COLORS["truth"]],
+                                                                        radii=[0.15]), static=True)
+
+    def _trajectory(self, t: float, ned: np.ndarray) -> None:
+        self._traj_n += 1
+        if self._traj_n % self._traj_stride == 0:
+            self._traj.append([float(x) for x in ned])
+            if len(self._traj) > TRAJ_POINTS:
+                self._traj = self._traj[::2]
+                self._traj_stride *= 2
+        if t - self._traj_last >= TRAJ_EVERY_S and len(self._traj) > 1:
+            self._traj_last = t
+            self.rec.set_time("sensor_time", duration=t)
+            self.rec.log("/world/trajectory/estimated",
+                         self.rr.LineStrips3D([np.array(self._traj)], colors=[COLORS["estimated"]], radii=[0.12]))
+
+    def on_event(self, t: float | None, level: str, text: str) -> None:
+        """A state change or warning into the text log."""
+        rr = self.rr
+        lvl = {"INFO": rr.TextLogLevel.INFO, "WARNING": rr.TextLogLevel.WARN, "ERROR": rr.TextLogLevel.ERROR}.get(
+            level, rr.TextLogLevel.INFO)
+        if t is not None:
+            self.rec.set_time("sensor_time", duration=t)
+        self.rec.log("/log", rr.TextLog(text, level=lvl))
+
+    def on_counters(self, t: float, counters: dict[str, int]) -> None:
+        """Rejected-sample counts by reason (one scalar entity per reason)."""
+        for reason, n in counters.items():
+            self._push(f"/health/rejected/{reason}", t, [float(n)])
+
+    # -- output ------------------------------------------------------------------
+    def _flush(self, path: str) -> None:
+        rows = self._buf.get(path)
+        if not rows:
+            return
+        rr = self.rr
+        ts = np.array([r[0] for r in rows])
+        vals = np.array([r[2] for r in rows], dtype=float)
+        indexes = [rr.TimeColumn("sensor_time", duration=ts)]
+        if self.live:
+            indexes.append(rr.TimeColumn("wall_time", timestamp=np.array([r[1] for r in rows])))
+        if path == "/world/vehicle":
+            cols = rr.Transform3D.columns(translation=vals[:, 0:3], quaternion=vals[:, 3:7])
+        else:
+            cols = rr.Scalars.columns(scalars=vals if vals.shape[1] > 1 else vals[:, 0])
+        self.rec.send_columns(path, indexes=indexes, columns=cols)
+        self.rows[path] += len(rows)
+        rows.clear()
+
+    def close(self) -> None:
+        """Flush every buffer and close the sinks (writes the file's footer)."""
+        for path in list(self._buf):
+            self._flush(path)
+        self.rec.flush(timeout_sec=10.0)
+        self.rec.disconnect()

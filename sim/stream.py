@@ -1,0 +1,151 @@
+"""Stream a simulated run over MAVLink the way an autopilot does.
+
+Messages (MAVLink 2, common dialect), all stamped with the simulated sensor
+time (``time_usec``/``time_boot_ms``):
+
+* HEARTBEAT at 1 Hz (MAV_TYPE_QUADROTOR, MAV_AUTOPILOT_GENERIC);
+* HIGHRES_IMU (SI units, ``id`` 0) or RAW_IMU (int16 mG and mrad/s, ArduPilot's
+  scaling) for every IMU sample; HIGHRES_IMU carries interval averages (like
+  PX4) or instantaneous samples, as chosen;
+* SIM_STATE with the ground truth, sent straight after the IMU message of the
+  same instant at ``truth_rate`` (it has no time field: pair it with the IMU
+  message before it);
+* GPS_RAW_INT (5 Hz) and SCALED_PRESSURE (10 Hz) from the truth with noise.
+
+Pacing: ``speed`` 1 = real time, X = X times faster, None = no pacing.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from dataclasses import dataclass
+from typing import Iterator
+
+import numpy as np
+
+from .generate import SimRun
+from .trajectory import instant_rates
+
+from mavins.mavlink import mavlink, mavutil
+
+G0 = 9.80665  # ArduPilot's mG scale (m/s^2 per 1000 mG)
+HIGHRES_ACC_GYRO = 0b111111  # fields_updated: x/y/z acc and gyro
+
+
+@dataclass(frozen=True)
+class StreamOptions:
+    """How to stream: IMU message, rate semantics, pace and identity."""
+
+    msg: str = "highres"
+    imu_rates: str = "averaged"
+    speed: float | None = 1.0
+    sysid: int = 1
+    compid: int = mavlink.MAV_COMP_ID_AUTOPILOT1
+    truth_rate: float = 50.0
+    gps_rate: float = 5.0
+    baro_rate: float = 10.0
+    raw_acc_scale: float = G0 / 1000.0  # m/s^2 per RAW_IMU count
+    raw_gyro_scale: float = 1e-3  # rad/s per RAW_IMU count
+    seed: int = 0
+
+
+@dataclass
+class StreamStats:
+    """What was sent."""
+
+    imu_messages: int = 0
+    truth_messages: int = 0
+    messages: int = 0
+
+
+def _every(times: np.ndarray, rate: float) -> np.ndarray:
+    """Boolean mask: the first sample at or after each multiple of 1/rate."""
+    k = np.floor(times * rate + 1e-9)
+    return np.concatenate(([True], k[1:] != k[:-1]))
+
+
+def frames(run: SimRun, mav: mavlink.MAVLink, opts: StreamOptions) -> Iterator[tuple[float, list[mavlink.MAVLink_message]]]:
+    """Yield (sensor time s, messages) for each IMU sample, in order."""
+    rng = np.random.default_rng(opts.seed + 1)
+    if opts.imu_rates == "averaged" or opts.msg == "raw":
+        w, f = run.rates()
+    else:
+        # instantaneous truth plus the same sensor errors the increments carry
+        w_true, f_true = instant_rates(run.exact)
+        dt = np.diff(np.concatenate(([run.exact.t0], run.exact.t)))[:, None]
+        kept = run.kept
+        w = w_true[kept] + (run.dtheta - run.exact.dtheta[kept]) / dt[kept]
+        f = f_true[kept] + (run.dv - run.exact.dv[kept]) / dt[kept]
+    truth = run.exact.truth[1:][run.kept]
+    t = run.t
+    send_truth = _every(t, opts.truth_rate)
+    send_gps = _every(t, opts.gps_rate)
+    send_baro = _every(t, opts.baro_rate)
+    send_hb = _every(t, 1.0)
+    for i in range(len(t)):
+        usec = int(round(t[i] * 1e6))
+        out: list[mavlink.MAVLink_message] = []
+        if send_hb[i]:
+            out.append(mav.heartbeat_encode(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_GENERIC,
+                                            mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 0, mavlink.MAV_STATE_ACTIVE))
+        if opts.msg == "raw":
+            acc = np.clip(np.round(f[i] / opts.raw_acc_scale), -32768, 32767).astype(int)
+            gyr = np.clip(np.round(w[i] / opts.raw_gyro_scale), -32768, 32767).astype(int)
+            out.append(mav.raw_imu_encode(usec, *acc, *gyr, 0, 0, 0, 0, 0))
+        else:
+            out.append(mav.highres_imu_encode(usec, *f[i], *w[i], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 20.0,
+                                              HIGHRES_ACC_GYRO, 0))
+        row = truth[i]
+        if send_truth[i]:
+            q = row[10:14]
+            lat, lon = row[1], row[2]
+            out.append(mav.sim_state_encode(
+                float(q[0]), float(q[1]), float(q[2]), float(q[3]),
+                math.radians(row[7]), math.radians(row[8]), math.radians(row[9]),
+                *map(float, f[i]), *map(float, w[i]),
+                float(lat), float(lon), float(row[3]), 0.0, 0.0,
+                float(row[4]), float(row[5]), float(row[6]),
+                int(round(lat * 1e7)), int(round(lon * 1e7)),
+            ))
+        if send_gps[i]:
+            noise = rng.normal(0.0, [0.5, 0.5, 1.0])
+            lat = row[1] + math.degrees(noise[0] / 6.371e6)
+            lon = row[2] + math.degrees(noise[1] / (6.371e6 * max(math.cos(math.radians(row[1])), 1e-6)))
+            vel = math.hypot(row[4], row[5])
+            cog = (math.degrees(math.atan2(row[5], row[4])) + 360.0) % 360.0
+            out.append(mav.gps_raw_int_encode(
+                usec, 3, int(round(lat * 1e7)), int(round(lon * 1e7)), int(round((row[3] + noise[2]) * 1000)),
+                80, 120, int(round(vel * 100)), int(round(cog * 100)) % 36000, 12,
+                int(round((row[3] + noise[2]) * 1000)), 500, 800, 50, 100, 0,
+            ))
+        if send_baro[i]:
+            press = 1013.25 * (1 - 2.25577e-5 * row[3]) ** 5.25588 + rng.normal(0.0, 0.012)
+            out.append(mav.scaled_pressure_encode(usec // 1000 % (2**32), press, 0.0, 2000, 0))
+        yield float(t[i]), out
+
+
+def stream(run: SimRun, url: str, opts: StreamOptions, stop: threading.Event | None = None) -> StreamStats:
+    """Send the run to a pymavlink connection URL (e.g. ``udpout:127.0.0.1:14551``)."""
+    conn = mavutil.mavlink_connection(url, source_system=opts.sysid, source_component=opts.compid, dialect="common")
+    stats = StreamStats()
+    t_wall0 = time.monotonic()
+    t_sim0 = run.exact.t0
+    try:
+        for t_s, msgs in frames(run, conn.mav, opts):
+            if stop is not None and stop.is_set():
+                break
+            if opts.speed is not None:
+                delay = t_wall0 + (t_s - t_sim0) / opts.speed - time.monotonic()
+                if delay > 0:
+                    time.sleep(delay)
+            for m in msgs:
+                conn.mav.send(m)
+                stats.messages += 1
+            stats.imu_messages += 1
+            stats.truth_messages += sum(1 for m in msgs if m.get_msgId() == mavlink.MAVLINK_MSG_ID_SIM_STATE)
+    finally:
+        conn.close()
+    return stats
+
