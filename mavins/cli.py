@@ -208,6 +208,8 @@ def _nav_options(p: argparse.ArgumentParser) -> None:
                    help="initial yaw in degrees, or a source: vehicle (its ATTITUDE), mag (magnetometer), "
                         "gyrocompass (navigation-grade gyros), auto (vehicle, else mag, else gyrocompass)")
     g.add_argument("--declination", type=float, default=0.0, metavar="DEG", help="magnetic declination for --heading mag")
+    g.add_argument("--gyro-bias", choices=("estimate", "none"), default="estimate",
+                   help="estimate = remove the mean gyro minus Earth rate of the static window (not with gyrocompass)")
     g.add_argument("--align", type=float, default=10.0, metavar="S", help="static coarse alignment window (sensor time)")
     g.add_argument("--imu-rates", choices=("averaged", "sampled"), default="averaged",
                    help="IMU rates are interval averages (PX4 HIGHRES_IMU) or instantaneous samples")
@@ -256,7 +258,8 @@ def _engine_config(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     except (TypeError, ValueError):
         pass
     return EngineConfig(lat=args.lat, lon=args.lon, alt=args.alt, heading=heading, declination=args.declination,
-                        align=args.align, imu_rates=args.imu_rates, rate=args.rate, samples=args.samples)
+                        align=args.align, imu_rates=args.imu_rates, rate=args.rate, samples=args.samples,
+                        gyro_bias=args.gyro_bias)
 
 
 def _ingest_config(args: argparse.Namespace):  # type: ignore[no-untyped-def]
@@ -363,7 +366,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
         if args.rerun:
             from .record import Recorder
 
-            recorder = Recorder(args.rerun, serve=False, app="mavins-replay")
+            recorder = Recorder(args.rerun, serve=False, app="mavins-replay", live=False)
         res = replay(args.log, engine_cfg, _ingest_config(args), args.output, recorder=recorder)
     except (DataFileError, ValueError) as exc:
         print(f"mavins replay: error: {exc}", file=sys.stderr)

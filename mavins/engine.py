@@ -49,6 +49,7 @@ class EngineConfig:
     motion_gyro: float = 0.1  # rad/s: a sample above this restarts the alignment
     motion_accel: float = 1.5  # m/s^2: |f| - g beyond this restarts the alignment
     max_gap: float = 1.0  # s: a longer gap in sensor time degrades the solution
+    gyro_bias: str = "estimate"  # "estimate": mean gyro minus Earth rate over the static window; "none"
 
 
 @dataclass
@@ -80,12 +81,15 @@ class Engine:
     _last_out: int = field(init=False, default=-1)
     _last_t: float | None = field(init=False, default=None)
     _gyro: np.ndarray = field(init=False, default_factory=lambda: np.zeros(3))
+    gyro_bias: np.ndarray = field(init=False, default_factory=lambda: np.zeros(3))
     _row: np.ndarray = field(init=False, default_factory=lambda: np.zeros(sd.OUT_SIZE))
 
     def __post_init__(self) -> None:
         h = self.cfg.heading
         if isinstance(h, str) and h not in HEADING_WORDS:
             raise ValueError(f"heading must be degrees or one of {', '.join(HEADING_WORDS)}, got {h!r}")
+        if self.cfg.gyro_bias not in ("estimate", "none"):
+            raise ValueError(f"gyro_bias must be estimate or none, got {self.cfg.gyro_bias!r}")
         self._kcfg = sd.make_config(
             samples=self.cfg.samples, attitude=self.cfg.attitude, order=self.cfg.order,
             earth_model=self.cfg.earth_model, vertical=self.cfg.vertical, imu_rates=self.cfg.imu_rates,
@@ -165,13 +169,21 @@ class Engine:
         self.heading_used = source
         self._acc.clear()
         self.degraded = False
+        self.gyro_bias = np.zeros(3)
+        if self.cfg.gyro_bias == "estimate" and source != "gyrocompass":
+            # at rest the gyros read C_n^b w_ie^n; the rest is bias (zero-rate calibration)
+            c_bn = sd.euler_to_dcm(roll, pitch, yaw)
+            self.gyro_bias = w_mean - c_bn.T @ earth.earth_rate_n(math.radians(lat))
         self._set_state(
             State.NAVIGATING,
             f"aligned over {smp.t - self._t_align0:.1f} s: roll {math.degrees(roll):.2f} pitch "
             f"{math.degrees(pitch):.2f} heading {math.degrees(yaw):.2f} deg from {source}",
         )
+        if self.gyro_bias.any():
+            self._event("INFO", "gyro bias estimated at rest: "
+                        + " ".join(f"{math.degrees(b) * 3600:.1f}" for b in self.gyro_bias) + " deg/h")
         if self.cfg.imu_rates == "sampled":
-            sd.push_rate(self._s, self._kcfg, smp.t, np.asarray(smp.gyro), np.asarray(smp.accel))
+            sd.push_rate(self._s, self._kcfg, smp.t, np.asarray(smp.gyro) - self.gyro_bias, np.asarray(smp.accel))
 
     def _heading(self, w_mean: np.ndarray, m_mean: np.ndarray, roll: float, pitch: float) -> tuple[float, str]:
         h = self.cfg.heading
@@ -190,7 +202,7 @@ class Engine:
         return align.gyrocompass(w_mean, roll, pitch), "gyrocompass"
 
     def _nav_step(self, smp: ImuSample) -> Output | None:
-        self._gyro = np.asarray(smp.gyro)
+        self._gyro = np.asarray(smp.gyro) - self.gyro_bias
         r = sd.push_rate(self._s, self._kcfg, smp.t, self._gyro, np.asarray(smp.accel))  # type: ignore[arg-type]
         if r != 1:
             return None

@@ -32,6 +32,7 @@ class Pipeline:
     ingest: Ingest = field(init=False)
     counters: Counter = field(default_factory=Counter)
     last_sample: ImuSample | None = None
+    recorder: object | None = None
 
     def __post_init__(self) -> None:
         self.engine = Engine(self.engine_cfg)
@@ -77,7 +78,29 @@ class Pipeline:
             if smp is None:
                 return None
         self.last_sample = smp
-        return self.engine.on_imu(smp)
+        out = self.engine.on_imu(smp)
+        rec = self.recorder
+        if rec is not None:
+            rec.on_sample(smp.t, smp.gyro, smp.accel)  # type: ignore[attr-defined]
+            if out is not None:
+                from .publish import local_ned
+
+                r = out.row
+                rec.on_output(r, out.origin, local_ned(float(r[1]), float(r[2]), float(r[3]), out.origin))  # type: ignore[attr-defined]
+                rejected = self.ingest.rejected
+                if rejected and self.engine.counters["outputs_since_health"] % 50 == 0:
+                    rec.on_counters(float(r[0]), dict(rejected))  # type: ignore[attr-defined]
+                self.engine.counters["outputs_since_health"] += 1
+        return out
+
+    def take_events(self) -> list[tuple[str, str]]:
+        """State changes and warnings since the last call (also sent to the recorder)."""
+        events = self.engine.take_events()
+        if self.recorder is not None:
+            t = self.last_sample.t if self.last_sample is not None else None
+            for level, text in events:
+                self.recorder.on_event(t, level, text)  # type: ignore[attr-defined]
+        return events
 
 
 def _msg_time(msg: object) -> float | None:

@@ -9,11 +9,9 @@ so they take exactly the path a live message takes.
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-
-import numpy as np
 
 from .engine import EngineConfig, Output
 from .files import DataFileError, SolutionWriter
@@ -120,10 +118,10 @@ def iter_log(path: Path) -> Iterator[tuple[float, mavlink.MAVLink_message]]:
 
 def replay(
     path: Path, engine_cfg: EngineConfig, ingest_cfg: IngestConfig, out_csv: Path | None,
-    on_output: "callable | None" = None,
+    on_output: Callable[[Output, Pipeline], None] | None = None, recorder: object | None = None,
 ) -> ReplayResult:
     """Run the pipeline over a log; write output sets to ``out_csv`` (solution columns)."""
-    pipeline = Pipeline(engine_cfg, ingest_cfg)
+    pipeline = Pipeline(engine_cfg, ingest_cfg, recorder=recorder)
     writer = SolutionWriter(out_csv) if out_csv is not None else None
     n_msg = n_out = 0
     try:
@@ -137,15 +135,14 @@ def replay(
                         writer.write(out.row)
                     if on_output is not None:
                         on_output(out, pipeline)
+                pipeline.take_events()
                 if n_msg % 2000 == 0:
                     bar.update(frac)
             bar.update(1.0)
     finally:
         if writer is not None:
             writer.close()
+        if recorder is not None:
+            recorder.close()  # type: ignore[attr-defined]
     return ReplayResult(n_msg, n_out, pipeline)
 
-
-def solution_array(rows: list[np.ndarray]) -> np.ndarray:
-    """Stack kernel rows (radians) into an array."""
-    return np.array(rows) if rows else np.empty((0, 14))

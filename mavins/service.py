@@ -99,8 +99,12 @@ class Service:
                     self.pipeline.counters["send_errors"] += 1
                     log.debug("send to %s failed: %s", getattr(link, "address", link), exc)
 
+    def attach_recorder(self, recorder: object) -> None:
+        """Record every sample, output and event to Rerun (closed with the service)."""
+        self.pipeline.recorder = recorder
+
     def _announce(self) -> None:
-        for level, text in self.pipeline.engine.take_events():
+        for level, text in self.pipeline.take_events():
             getattr(log, level.lower() if level != "WARNING" else "warning", log.info)(text)
             self._send([publish.statustext(self.mav, level, text)])
 
@@ -170,6 +174,13 @@ class Service:
                 link.close()
             except OSError:
                 pass
+        if self.pipeline.recorder is not None:
+            try:
+                self.pipeline.take_events()
+                self.pipeline.recorder.close()  # type: ignore[attr-defined]
+            except Exception as exc:  # a recording failure must never take navigation down
+                log.error("closing the Rerun recording failed: %s", exc)
+            self.pipeline.recorder = None
         c = dict(self.pipeline.counters)
         c.update({f"rejected_{k}": v for k, v in self.pipeline.ingest.rejected.items()})
         c.update(self.pipeline.engine.counters)

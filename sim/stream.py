@@ -10,6 +10,8 @@ time (``time_usec``/``time_boot_ms``):
 * SIM_STATE with the ground truth, sent straight after the IMU message of the
   same instant at ``truth_rate`` (it has no time field: pair it with the IMU
   message before it);
+* ATTITUDE (10 Hz): the simulated autopilot's own attitude estimate, taken as
+  the vehicle's true attitude;
 * GPS_RAW_INT (5 Hz) and SCALED_PRESSURE (10 Hz) from the truth with noise.
 
 Pacing: ``speed`` 1 = real time, X = X times faster, None = no pacing.
@@ -46,6 +48,7 @@ class StreamOptions:
     truth_rate: float = 50.0
     gps_rate: float = 5.0
     baro_rate: float = 10.0
+    attitude_rate: float = 10.0
     raw_acc_scale: float = G0 / 1000.0  # m/s^2 per RAW_IMU count
     raw_gyro_scale: float = 1e-3  # rad/s per RAW_IMU count
     seed: int = 0
@@ -83,6 +86,7 @@ def frames(run: SimRun, mav: mavlink.MAVLink, opts: StreamOptions) -> Iterator[t
     send_truth = _every(t, opts.truth_rate)
     send_gps = _every(t, opts.gps_rate)
     send_baro = _every(t, opts.baro_rate)
+    send_att = _every(t, opts.attitude_rate)
     send_hb = _every(t, 1.0)
     for i in range(len(t)):
         usec = int(round(t[i] * 1e6))
@@ -109,6 +113,9 @@ def frames(run: SimRun, mav: mavlink.MAVLink, opts: StreamOptions) -> Iterator[t
                 float(row[4]), float(row[5]), float(row[6]),
                 int(round(lat * 1e7)), int(round(lon * 1e7)),
             ))
+        if send_att[i]:
+            e = np.radians(row[14:17])
+            out.append(mav.attitude_encode(usec // 1000 % (2**32), float(e[0]), float(e[1]), float(e[2]), 0.0, 0.0, 0.0))
         if send_gps[i]:
             noise = rng.normal(0.0, [0.5, 0.5, 1.0])
             lat = row[1] + math.degrees(noise[0] / 6.371e6)
