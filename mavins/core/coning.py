@@ -48,27 +48,39 @@ def nsample_coning(dtheta: np.ndarray, n: int) -> np.ndarray:
 
     ``dtheta`` holds at least ``n`` rows of angle increments, oldest first.
     """
-    out = np.zeros(3)
-    if n < 2:
-        return out
-    acc = np.zeros(3)
+    ax = ay = az = 0.0
     for i in range(n - 1):
-        acc += CONING_COEFFS[n, i] * dtheta[i]
-    return cross(acc, dtheta[n - 1])
+        k = CONING_COEFFS[n, i]
+        ax += k * dtheta[i, 0]
+        ay += k * dtheta[i, 1]
+        az += k * dtheta[i, 2]
+    bx, by, bz = dtheta[n - 1, 0], dtheta[n - 1, 1], dtheta[n - 1, 2]
+    out = np.empty(3)
+    out[0] = ay * bz - az * by
+    out[1] = az * bx - ax * bz
+    out[2] = ax * by - ay * bx
+    return out
 
 
 @kernel
 def nsample_sculling(dtheta: np.ndarray, dv: np.ndarray, n: int) -> np.ndarray:
     """N-sample sculling correction ``sum_{i<N} k_{N-i} (dth_i x dv_N + dv_i x dth_N)``."""
-    out = np.zeros(3)
-    if n < 2:
-        return out
-    acc_th = np.zeros(3)
-    acc_v = np.zeros(3)
+    tx = ty = tz = vx = vy = vz = 0.0
     for i in range(n - 1):
-        acc_th += CONING_COEFFS[n, i] * dtheta[i]
-        acc_v += CONING_COEFFS[n, i] * dv[i]
-    return cross(acc_th, dv[n - 1]) + cross(acc_v, dtheta[n - 1])
+        k = CONING_COEFFS[n, i]
+        tx += k * dtheta[i, 0]
+        ty += k * dtheta[i, 1]
+        tz += k * dtheta[i, 2]
+        vx += k * dv[i, 0]
+        vy += k * dv[i, 1]
+        vz += k * dv[i, 2]
+    thx, thy, thz = dtheta[n - 1, 0], dtheta[n - 1, 1], dtheta[n - 1, 2]
+    dvx, dvy, dvz = dv[n - 1, 0], dv[n - 1, 1], dv[n - 1, 2]
+    out = np.empty(3)
+    out[0] = (ty * dvz - tz * dvy) + (vy * thz - vz * thy)
+    out[1] = (tz * dvx - tx * dvz) + (vz * thx - vx * thz)
+    out[2] = (tx * dvy - ty * dvx) + (vx * thy - vy * thx)
+    return out
 
 
 @kernel
@@ -88,8 +100,15 @@ def rotation_compensation(phi: np.ndarray, dv: np.ndarray) -> np.ndarray:
         p = np.sqrt(p2)
         a = (1.0 - np.cos(p)) / p2
         b = (1.0 - np.sin(p) / p) / p2
-    c1 = cross(phi, dv)
-    return a * c1 + b * cross(phi, c1)
+    px, py, pz = phi[0], phi[1], phi[2]
+    c1x = py * dv[2] - pz * dv[1]
+    c1y = pz * dv[0] - px * dv[2]
+    c1z = px * dv[1] - py * dv[0]
+    out = np.empty(3)
+    out[0] = a * c1x + b * (py * c1z - pz * c1y)
+    out[1] = a * c1y + b * (pz * c1x - px * c1z)
+    out[2] = a * c1z + b * (px * c1y - py * c1x)
+    return out
 
 
 @kernel

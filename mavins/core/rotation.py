@@ -289,16 +289,27 @@ def rotvec_to_dcm(phi: np.ndarray) -> np.ndarray:
 
     [TW11] slide "11.2.1 DCM algorithm".
     """
-    s2 = phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2]
-    s = np.sqrt(s2)
-    if s < SMALL_ANGLE:
+    x, y, z = phi[0], phi[1], phi[2]
+    s2 = x * x + y * y + z * z
+    if s2 < SMALL_ANGLE * SMALL_ANGLE:
         a1 = 1.0 - s2 / 6.0 + s2 * s2 / 120.0
         a2 = 0.5 - s2 / 24.0 + s2 * s2 / 720.0
     else:
+        s = np.sqrt(s2)
         a1 = np.sin(s) / s
         a2 = (1.0 - np.cos(s)) / s2
-    k = skew(phi)
-    return np.eye(3) + a1 * k + a2 * mat_mul(k, k)
+    # I + a1 [phi x] + a2 [phi x]^2, with [phi x]^2 = phi phi^T - s^2 I
+    c = np.empty((3, 3))
+    c[0, 0] = 1.0 + a2 * (x * x - s2)
+    c[0, 1] = -a1 * z + a2 * x * y
+    c[0, 2] = a1 * y + a2 * x * z
+    c[1, 0] = a1 * z + a2 * x * y
+    c[1, 1] = 1.0 + a2 * (y * y - s2)
+    c[1, 2] = -a1 * x + a2 * y * z
+    c[2, 0] = -a1 * y + a2 * x * z
+    c[2, 1] = a1 * x + a2 * y * z
+    c[2, 2] = 1.0 + a2 * (z * z - s2)
+    return c
 
 
 @kernel

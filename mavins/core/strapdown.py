@@ -53,7 +53,6 @@ from .rotation import (
     orthonormalize,
     quat_canonical,
     quat_mul,
-    quat_normalize,
     quat_to_dcm,
     rotvec_to_dcm,
     rotvec_to_quat,
@@ -291,101 +290,119 @@ def _l_cycle(s: np.ndarray, cfg: np.ndarray, T: float, v_mid: np.ndarray) -> Non
 
 @kernel
 def k_update(s: np.ndarray, cfg: np.ndarray) -> None:
-    """One attitude/velocity/position update over the buffered samples (k cycle)."""
+    """One attitude/velocity/position update over the buffered samples (k cycle).
+
+    Vector arithmetic is written on scalars so the update allocates only a few
+    small arrays (it runs once per N samples, up to several kHz).
+    """
     n = int(s[S_NJ])
     T = s[S_BUFT]
     dth = s[S_BTH : S_BTH + 18].reshape(6, 3)
     dvs = s[S_BDV : S_BDV + 18].reshape(6, 3)
-    alpha = np.zeros(3)
+    sigma = np.zeros(3)
     vsum = np.zeros(3)
     for i in range(n):
-        alpha += dth[i]
-        vsum += dvs[i]
+        for a in range(3):
+            sigma[a] += dth[i, a]
+            vsum[a] += dvs[i, a]
 
     # Body rotation vector and sculling ([TW11] 11.2.2, 11.3; coning.py).
-    sigma = alpha.copy()
-    scul = np.zeros(3)
+    scx = scy = scz = 0.0
     if cfg[CFG_CONING] > 0.5 and n >= 2:
         if cfg[CFG_SAMPLED] > 0.5:
-            sigma += s[S_CONE : S_CONE + 3]
-            scul = s[S_SCUL : S_SCUL + 3].copy()
+            for a in range(3):
+                sigma[a] += s[S_CONE + a]
+            scx, scy, scz = s[S_SCUL], s[S_SCUL + 1], s[S_SCUL + 2]
         else:
-            sigma += nsample_coning(dth, n)
+            cone = nsample_coning(dth, n)
             scul = nsample_sculling(dth, dvs, n)
+            for a in range(3):
+                sigma[a] += cone[a]
+            scx, scy, scz = scul[0], scul[1], scul[2]
 
-    v_old = s[S_V : S_V + 3].copy()
-    v_prev = s[S_VP : S_VP + 3].copy()
+    vox, voy, voz = s[S_V], s[S_V + 1], s[S_V + 2]
+    vpx, vpy, vpz = s[S_VP], s[S_VP + 1], s[S_VP + 2]
     # Mid-interval velocity extrapolated from the last two updates ([TW11] 11.4,
     # Coriolis and gravity "evaluated at the l rate").
-    v_mid = 1.5 * v_old - 0.5 * v_prev
+    vmx, vmy, vmz = 1.5 * vox - 0.5 * vpx, 1.5 * voy - 0.5 * vpy, 1.5 * voz - 0.5 * vpz
     if int(s[S_NL]) % int(cfg[CFG_L_EVERY]) == 0:
-        _l_cycle(s, cfg, T, v_mid)
+        _l_cycle(s, cfg, T, np.array([vmx, vmy, vmz]))
     s[S_NL] += 1.0
-    w_ie = s[S_WIE : S_WIE + 3]
-    w_en = s[S_WEN : S_WEN + 3]
-    zeta = (w_ie + w_en) * T
+    wix, wiy, wiz = s[S_WIE], s[S_WIE + 1], s[S_WIE + 2]
+    wex, wey, wez = s[S_WEN], s[S_WEN + 1], s[S_WEN + 2]
+    zx, zy, zz = (wix + wex) * T, (wiy + wey) * T, (wiz + wez) * T
 
     # Specific-force transformation ([TW11] 11.3, eq. 11.64) with Savage's
-    # rotation term and the navigation-frame rotation correction.
-    c_old = s[S_C : S_C + 9].reshape(3, 3).copy()
-    dv_body = vsum + rotation_compensation(sigma, vsum) + scul
-    u = mat_vec(c_old, dv_body)
-    u -= 0.5 * cross(zeta, u)
-    coriolis = cross(2.0 * w_ie + w_en, v_mid)
-    v_new = v_old + u - coriolis * T
-    v_new[2] += s[S_G] * T
+    # rotation term and the navigation-frame rotation correction -1/2 zeta x u.
+    rc = rotation_compensation(sigma, vsum)
+    bx = vsum[0] + rc[0] + scx
+    by = vsum[1] + rc[1] + scy
+    bz = vsum[2] + rc[2] + scz
+    c = s[S_C : S_C + 9]
+    ux = c[0] * bx + c[1] * by + c[2] * bz
+    uy = c[3] * bx + c[4] * by + c[5] * bz
+    uz = c[6] * bx + c[7] * by + c[8] * bz
+    ux, uy, uz = ux - 0.5 * (zy * uz - zz * uy), uy - 0.5 * (zz * ux - zx * uz), uz - 0.5 * (zx * uy - zy * ux)
+    ox, oy, oz = 2.0 * wix + wex, 2.0 * wiy + wey, 2.0 * wiz + wez
+    vnx = vox + ux - (oy * vmz - oz * vmy) * T
+    vny = voy + uy - (oz * vmx - ox * vmz) * T
+    vnz = voz + uz - (ox * vmy - oy * vmx) * T + s[S_G] * T
     if cfg[CFG_VHOLD] > 0.5:
-        v_new[2] = s[S_VD0]
+        vnz = s[S_VD0]
 
     # Attitude: body update A(sigma), navigation-frame update B = exp(-zeta).
     order = int(cfg[CFG_ORDER])
+    mzeta = np.array([-zx, -zy, -zz])
     if cfg[CFG_DCM] > 0.5:
-        c_new = mat_mul(mat_mul(rotvec_to_dcm(-zeta), c_old), body_update_dcm(sigma, order))
+        c_old = c.reshape(3, 3)
+        c_new = mat_mul(mat_mul(rotvec_to_dcm(mzeta), c_old), body_update_dcm(sigma, order))
         k = int(cfg[CFG_ORTHO_EVERY])
         if k > 0 and (int(s[S_NK]) + 1) % k == 0:
             c_new = orthonormalize(c_new)
         s[S_C : S_C + 9] = c_new.ravel()
         s[S_Q : S_Q + 4] = dcm_to_quat(c_new)
     else:
-        q = s[S_Q : S_Q + 4].copy()
-        q = quat_mul(rotvec_to_quat(-zeta), quat_mul(q, body_update_quat(sigma, order)))
-        q = quat_normalize(q)
-        s[S_Q : S_Q + 4] = q
-        s[S_C : S_C + 9] = quat_to_dcm(q).ravel()
+        q = quat_mul(rotvec_to_quat(mzeta), quat_mul(s[S_Q : S_Q + 4], body_update_quat(sigma, order)))
+        qn = np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+        for a in range(4):
+            s[S_Q + a] = q[a] / qn
+        s[S_C : S_C + 9] = quat_to_dcm(s[S_Q : S_Q + 4]).ravel()
 
     # Position ([TW11] 11.4 rectangular / trapezoidal / Simpson).
     rule = int(cfg[CFG_POSINT])
     if rule == 0:
-        v_eff = v_old
+        ex, ey, ez = vox, voy, voz
     elif rule == 1:
-        v_eff = 0.5 * (v_old + v_new)
+        ex, ey, ez = 0.5 * (vox + vnx), 0.5 * (voy + vny), 0.5 * (voz + vnz)
     else:
         # One-step parabola through v(k-2), v(k-1), v(k) integrated over the
         # last interval: (-v(k-2) + 8 v(k-1) + 5 v(k)) / 12. The lecture's
         # printed Simpson line covers two intervals with one-interval weights;
         # see docs/algorithms.md.
-        v_eff = (-v_prev + 8.0 * v_old + 5.0 * v_new) / 12.0
+        ex = (-vpx + 8.0 * vox + 5.0 * vnx) / 12.0
+        ey = (-vpy + 8.0 * voy + 5.0 * vny) / 12.0
+        ez = (-vpz + 8.0 * voz + 5.0 * vnz) / 12.0
     if cfg[CFG_EARTH] > 0.5:
         lat, lon, h = position(s, cfg)
         r_n, r_e = earth.radii(lat)
-        lat_mid = lat + 0.5 * T * v_eff[0] / (r_n + h)
-        h_mid = h - 0.5 * T * v_eff[2]
-        xi = earth.transport_rate(lat_mid, h_mid, v_eff) * T
+        lat_mid = lat + 0.5 * T * ex / (r_n + h)
+        h_mid = h - 0.5 * T * ez
+        xi = earth.transport_rate(lat_mid, h_mid, np.array([ex, ey, ez])) * T
         cne = mat_mul(s[S_CNE : S_CNE + 9].reshape(3, 3), rotvec_to_dcm(xi))
         s[S_CNE : S_CNE + 9] = cne.ravel()
     else:
-        s[S_PF] += v_eff[0] * T
-        s[S_PF + 1] += v_eff[1] * T
-        s[S_PF + 2] += v_eff[2] * T
+        s[S_PF] += ex * T
+        s[S_PF + 1] += ey * T
+        s[S_PF + 2] += ez * T
     if cfg[CFG_VHOLD] > 0.5:
         s[S_H] = s[S_H0]
         s[S_PF + 2] = 0.0
     else:
-        s[S_H] -= v_eff[2] * T
+        s[S_H] -= ez * T
 
-    s[S_VPP : S_VPP + 3] = v_prev
-    s[S_VP : S_VP + 3] = v_old
-    s[S_V : S_V + 3] = v_new
+    s[S_VPP], s[S_VPP + 1], s[S_VPP + 2] = vpx, vpy, vpz
+    s[S_VP], s[S_VP + 1], s[S_VP + 2] = vox, voy, voz
+    s[S_V], s[S_V + 1], s[S_V + 2] = vnx, vny, vnz
     s[S_T] = s[S_TJ]
     s[S_NK] += 1.0
     s[S_NJ] = 0.0
