@@ -291,6 +291,16 @@ def _add_run(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--rerun", type=Path, metavar="FILE.rrd", help="record to a Rerun file")
     p.add_argument("--rerun-serve", action="store_true", help="serve the recording for a live Rerun viewer")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds of wall time")
+    p.add_argument("--signing-key", type=Path, metavar="FILE",
+                   help="MAVLink 2 signing key (32 bytes or 64 hex digits, mode 600): input must be signed, "
+                        "output is signed (see 'mavins key')")
+    p.add_argument("--peer-timeout", type=float, default=10.0, metavar="S",
+                   help="stop sending to a listening link's peer after S seconds of silence")
+    p.add_argument("--max-peers", type=int, default=8, metavar="N", help="most peers a listening link sends to")
+    p.add_argument("--max-accel", type=float, default=16 * 9.80665, metavar="M_S2", help="accelerometer range")
+    p.add_argument("--max-gyro", type=float, default=2000.0, metavar="DEG_S", help="gyro range")
+    p.add_argument("--max-gap", type=float, default=1.0, metavar="S",
+                   help="a longer gap in sensor time marks the solution degraded")
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     _nav_options(p)
     p.set_defaults(func=_cmd_run, parser=p)
@@ -303,6 +313,7 @@ def _setup_logging(verbose: bool) -> None:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
+    import math
     import signal
     import threading
 
@@ -316,13 +327,29 @@ def _cmd_run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"mavins run: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    from .link import PeerPolicy
+    from .signing import KeyFileError, load_key
+
+    key = state = None
+    if args.signing_key is not None:
+        try:
+            key = load_key(args.signing_key)
+        except KeyFileError as exc:
+            print(f"mavins run: error: {exc}", file=sys.stderr)
+            return EXIT_USAGE
+        state = args.signing_key.with_name(args.signing_key.name + ".timestamp")
+    engine_cfg.max_gap = args.max_gap
+    ingest_cfg = _ingest_config(args)
+    ingest_cfg.max_accel = args.max_accel
+    ingest_cfg.max_gyro = math.radians(args.max_gyro)
     cfg = ServiceConfig(master=args.master, outs=args.out, sysid=args.sysid, compid=args.compid, tlog=args.tlog,
-                        solution=args.output, request_imu=args.request_imu,
+                        solution=args.output, request_imu=args.request_imu, signing_key=key, signing_state=state,
+                        peers=PeerPolicy(timeout=args.peer_timeout, max_peers=args.max_peers),
                         publish=PublishConfig(geoid_height=args.geoid_height))
     try:
-        svc = Service(engine_cfg, _ingest_config(args), cfg)
+        svc = Service(engine_cfg, ingest_cfg, cfg)
     except OSError as exc:
-        print(f"mavins run: error: cannot open {args.master}: {exc}", file=sys.stderr)
+        print(f"mavins run: error: cannot open a link: {exc}", file=sys.stderr)
         return EXIT_USAGE
     if args.rerun or args.rerun_serve:
         from .record import Recorder
@@ -388,7 +415,7 @@ def _add_demo(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--scenario", default="flight", help="built-in scenario or .toml path")
     p.add_argument("--duration", type=float, default=120.0, metavar="S", help="simulated seconds")
-    p.add_argument("--speed", default="10", metavar="X|max", help="pace: 1 = real time")
+    p.add_argument("--speed", default="5", metavar="X|max", help="pace: 1 = real time")
     p.add_argument("--grade", default="industrial", choices=("ideal", "consumer", "industrial", "tactical", "navigation"))
     p.add_argument("--heading", default="vehicle", help="heading source for the alignment")
     p.add_argument("--rerun", type=Path, default=Path("mavins-demo.rrd"), metavar="FILE.rrd", help="recording to write")
@@ -420,6 +447,37 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_key(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "key",
+        help="make a MAVLink 2 signing key file",
+        description="Write a 32-byte signing key (as 64 hex digits, file mode 600). With --passphrase the key is "
+        "SHA-256 of the passphrase, the same key MAVProxy's 'signing setup PASSPHRASE' uses; without, a random key.",
+    )
+    p.add_argument("file", type=Path, metavar="FILE")
+    p.add_argument("--passphrase", help="derive the key from a passphrase (MAVProxy's convention)")
+    p.add_argument("--force", action="store_true", help="overwrite an existing file")
+    p.set_defaults(func=_cmd_key)
+
+
+def _cmd_key(args: argparse.Namespace) -> int:
+    import os
+    import secrets
+
+    from .signing import key_from_passphrase
+
+    if args.file.exists() and not args.force:
+        print(f"mavins key: error: {args.file} exists (use --force to overwrite)", file=sys.stderr)
+        return EXIT_USAGE
+    key = key_from_passphrase(args.passphrase) if args.passphrase else secrets.token_bytes(32)
+    fd = os.open(args.file, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, "w") as fh:
+        fh.write(key.hex() + "\n")
+    os.chmod(args.file, 0o600)
+    print(f"mavins key: wrote {args.file} (mode 600)", file=sys.stderr)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The full ``mavins`` parser with every subcommand."""
     parser = argparse.ArgumentParser(
@@ -444,7 +502,7 @@ def _version() -> str:
         return "unknown"
 
 
-_EXTRA_COMMANDS: list[Callable[[argparse._SubParsersAction], None]] = [_add_sim, _add_run, _add_replay, _add_demo]
+_EXTRA_COMMANDS: list[Callable[[argparse._SubParsersAction], None]] = [_add_sim, _add_run, _add_replay, _add_demo, _add_key]
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -226,3 +226,20 @@ class Engine:
     def take_events(self) -> list[tuple[str, str]]:
         ev, self.events = self.events, []
         return ev
+
+
+def warm_up() -> None:
+    """Load (or compile, the first time on a machine) every kernel the engine calls.
+
+    Called before a live service reads its link, so the first samples are not
+    held up by compilation.
+    """
+    s = sd.init_state(0.0, 0.8, 0.1, 100.0, np.zeros(3), 0.0, 0.0, 0.0)
+    for rates in ("averaged", "sampled"):
+        cfg = sd.make_config(imu_rates=rates)
+        for i in range(1, 5):
+            sd.push_rate(s, cfg, 0.01 * i, np.zeros(3), np.array([0.0, 0.0, -9.8]))
+    sd.solution_row(s, cfg, np.zeros(sd.OUT_SIZE))
+    sd.euler_to_dcm(0.0, 0.0, 0.0)
+    earth.earth_rate_n(0.8)
+    earth.gravity(0.8, 100.0)

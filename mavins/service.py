@@ -1,36 +1,46 @@
 """``mavins run``: the live MAVLink INS service (link in -> pipeline -> publish).
 
-Reads a pymavlink connection (UDP first; any connection string), feeds every
-message through the shared pipeline, publishes output sets to the master link
-and every ``--out`` link, keeps an input tlog, and stops cleanly on request.
+Reads a link (UDP handled by mavins.link; other pymavlink connection strings
+through pymavlink), feeds every message through the shared pipeline,
+publishes output sets to the master link's authorised peers and every
+``--out`` link, keeps an input tlog, and stops cleanly on request.
+
+Robustness (docs/reliability.md): every rejection is counted by reason; input
+beyond capacity is dropped by draining the socket (counted), never by
+blocking or buffering without bound; failures of optional parts (recording,
+output links, tlog) are logged and switch that part off, never navigation.
 """
 
 from __future__ import annotations
 
 import logging
 import select
-import socket
 import struct
 import threading
 import time
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from . import publish
-from .engine import EngineConfig, State
+from .engine import EngineConfig, State, warm_up
 from .files import SolutionWriter
-from .ingest import IngestConfig
-from .mavlink import mavlink, mavutil
+from .ingest import IMU_MESSAGES, IngestConfig
+from .link import Link, PeerPolicy, open_link
+from .mavlink import mavlink
 from .pipeline import Pipeline
+from .signing import Signer, Verifier
 
 log = logging.getLogger("mavins")
 
-RCVBUF_BYTES = 8 * 1024 * 1024
+BATCH = 256  # datagrams read per loop turn
+MAX_LAG = 1.0  # s: input that waited longer than this in the socket is dropped
+SYS_STATUS_PERIOD = 1.0  # s
 
 
 @dataclass
 class ServiceConfig:
-    """Links, identity and side outputs of the service."""
+    """Links, identity, security and side outputs of the service."""
 
     master: str = "udpin:127.0.0.1:14551"
     outs: list[str] = field(default_factory=list)
@@ -39,6 +49,9 @@ class ServiceConfig:
     tlog: Path | None = None
     solution: Path | None = None
     request_imu: float | None = None
+    signing_key: bytes | None = None
+    signing_state: Path | None = None
+    peers: PeerPolicy = field(default_factory=PeerPolicy)
     publish: publish.PublishConfig = field(default_factory=publish.PublishConfig)
 
 
@@ -52,7 +65,8 @@ class Summary:
     counters: dict[str, int] = field(default_factory=dict)
 
     def lines(self) -> list[str]:
-        out = [f"messages received: {self.messages}", f"output sets published: {self.outputs}", f"final state: {self.state}"]
+        out = [f"messages received: {self.messages}", f"output sets published: {self.outputs}",
+               f"final state: {self.state}"]
         out += [f"{k}: {v}" for k, v in sorted(self.counters.items())]
         return out
 
@@ -62,66 +76,106 @@ class Service:
 
     def __init__(self, engine_cfg: EngineConfig, ingest_cfg: IngestConfig, cfg: ServiceConfig) -> None:
         self.cfg = cfg
+        warm_up()
         self.pipeline = Pipeline(engine_cfg, ingest_cfg, own_component=cfg.compid)
         self.summary = Summary()
+        self.counters: Counter = Counter()
         self.mav = mavlink.MAVLink(None, srcSystem=cfg.sysid or 0, srcComponent=cfg.compid)
-        self.mav.robust_parsing = True
-        self.master = mavutil.mavlink_connection(cfg.master, source_system=cfg.sysid or 0,
-                                                 source_component=cfg.compid, dialect="common")
-        self._tune_socket(self.master)
-        self.outs = [mavutil.mavlink_connection(u, source_system=cfg.sysid or 0, source_component=cfg.compid,
-                                                dialect="common") for u in cfg.outs]
+        self.verifier = Verifier(cfg.signing_key) if cfg.signing_key else None
+        self.signer = Signer(cfg.signing_key, cfg.signing_state) if cfg.signing_key else None
+        if self.signer is not None:
+            self.signer.attach(self.mav)
+        self.master: Link = open_link(cfg.master, cfg.peers)
+        self.outs: list[Link] = []
+        try:
+            self.outs = [open_link(u, cfg.peers) for u in cfg.outs]
+        except OSError:
+            self.master.close()
+            raise
         self._tlog = open(cfg.tlog, "wb") if cfg.tlog else None
         self._solution = SolutionWriter(cfg.solution) if cfg.solution else None
         self._sysid_known = cfg.sysid is not None
         self._last_hb = 0.0
+        self._last_status = 0.0
         self._last_imu_wall = 0.0
         self._last_request = 0.0
-        self._acked = False
+        self._cpu0 = (time.process_time(), time.monotonic())
 
-    @staticmethod
-    def _tune_socket(conn: object) -> None:
-        sock = getattr(conn, "port", None)
-        if isinstance(sock, socket.socket) and sock.type == socket.SOCK_DGRAM:
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RCVBUF_BYTES)
-
-    # -- sending -------------------------------------------------------------
-    def _send(self, msgs: list[mavlink.MAVLink_message]) -> None:
-        if not self._sysid_known:
-            return
-        for m in msgs:
-            buf = m.pack(self.mav)
-            self.mav.seq = (self.mav.seq + 1) % 256
-            for link in (self.master, *self.outs):
-                try:
-                    link.write(buf)
-                except OSError as exc:
-                    self.pipeline.counters["send_errors"] += 1
-                    log.debug("send to %s failed: %s", getattr(link, "address", link), exc)
-
+    # -- optional parts ----------------------------------------------------------
     def attach_recorder(self, recorder: object) -> None:
         """Record every sample, output and event to Rerun (closed with the service)."""
         self.pipeline.recorder = recorder
 
+    def _optional_failed(self, part: str, exc: BaseException) -> None:
+        self.counters[f"{part}_failed"] += 1
+        log.error("%s failed and is switched off (navigation goes on): %s", part, exc)
+
+    # -- sending -------------------------------------------------------------------
+    def _send(self, msgs: list[mavlink.MAVLink_message]) -> None:
+        if not self._sysid_known:
+            return
+        for m in msgs:
+            if self.signer is not None:
+                buf = self.signer.pack(m, self.mav)
+            else:
+                buf = m.pack(self.mav)
+            self.mav.seq = (self.mav.seq + 1) % 256
+            for link in (self.master, *self.outs):
+                try:
+                    link.send(buf)
+                except OSError as exc:
+                    self.counters["send_errors"] += 1
+                    log.debug("send to %s failed: %s", link.url, exc)
+
     def _announce(self) -> None:
-        for level, text in self.pipeline.take_events():
-            getattr(log, level.lower() if level != "WARNING" else "warning", log.info)(text)
+        try:
+            events = self.pipeline.take_events()
+        except Exception as exc:  # the recorder may fail inside take_events
+            self.pipeline.recorder = None
+            self._optional_failed("recording", exc)
+            events = self.pipeline.engine.take_events()
+        for level, text in events:
+            log.log(logging.WARNING if level == "WARNING" else logging.INFO, text)
             self._send([publish.statustext(self.mav, level, text)])
 
-    # -- receiving -----------------------------------------------------------
-    def _handle(self, msg: mavlink.MAVLink_message) -> None:
+    # -- receiving -----------------------------------------------------------------
+    def _handle(self, msg: mavlink.MAVLink_message, addr: object) -> None:
         self.summary.messages += 1
-        if self._tlog is not None and msg.get_type() != "BAD_DATA":
-            self._tlog.write(struct.pack(">Q", int(time.time() * 1e6)) + msg.get_msgbuf())
-        out = self.pipeline.handle(msg)
+        name = msg.get_type()
+        if name == "BAD_DATA":
+            reason = str(getattr(msg, "reason", ""))
+            key = "bad_crc" if "CRC" in reason else "truncated" if "truncated" in reason else "garbage"
+            self.counters[f"rejected_{key}"] += 1
+            return
+        if self.verifier is not None:
+            why = self.verifier.check(bytes(msg.get_msgbuf()), msg.get_srcSystem(), msg.get_srcComponent())
+            if why is not None:
+                self.counters[f"rejected_{why}"] += 1
+                return
+        self.master.authorize(addr)
+        if self._tlog is not None:
+            try:
+                self._tlog.write(struct.pack(">Q", int(time.time() * 1e6)) + bytes(msg.get_msgbuf()))
+            except OSError as exc:
+                self._tlog = None
+                self._optional_failed("tlog", exc)
+        try:
+            out = self.pipeline.handle(msg)
+        except Exception as exc:
+            if self.pipeline.recorder is None:
+                raise
+            # only the recorder runs optional code inside the pipeline
+            self.pipeline.recorder = None
+            self._optional_failed("recording", exc)
+            out = None
         if not self._sysid_known and self.pipeline.vehicle_sysid is not None:
             self.mav.srcSystem = self.pipeline.vehicle_sysid
             self._sysid_known = True
-        if msg.get_type() in ("HIGHRES_IMU", "RAW_IMU", "SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3"):
+        if name in IMU_MESSAGES:
             self._last_imu_wall = time.monotonic()
-        if msg.get_type() == "COMMAND_ACK" and msg.command == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
-            self._acked = msg.result == mavlink.MAV_RESULT_ACCEPTED
-            log.info("SET_MESSAGE_INTERVAL %s", "accepted" if self._acked else f"refused (result {msg.result})")
+        elif name == "COMMAND_ACK" and msg.command == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
+            ok = msg.result == mavlink.MAV_RESULT_ACCEPTED
+            log.info("SET_MESSAGE_INTERVAL %s", "accepted" if ok else f"refused (result {msg.result})")
         self._announce()
         if out is not None:
             self._send(publish.encode(self.mav, out, self.cfg.publish, self.pipeline.engine.counters["restarts"]))
@@ -134,35 +188,66 @@ class Service:
         if now - self._last_hb >= 1.0:
             self._last_hb = now
             self._send([publish.heartbeat(self.mav, self.pipeline.engine.state is State.NAVIGATING)])
-        if self.cfg.request_imu and self._sysid_known and now - self._last_imu_wall > 2.0 and now - self._last_request > 2.0:
+        if now - self._last_status >= SYS_STATUS_PERIOD:
+            self._last_status = now
+            self._send([self._sys_status(now)])
+        if (self.cfg.request_imu and self._sysid_known and now - self._last_imu_wall > 2.0
+                and now - self._last_request > 2.0):
             self._last_request = now
-            interval_us = 1e6 / self.cfg.request_imu
-            self._send([self.mav.command_long_encode(self.mav.srcSystem, mavlink.MAV_COMP_ID_AUTOPILOT1,
-                                                     mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
-                                                     mavlink.MAVLINK_MSG_ID_HIGHRES_IMU, interval_us, 0, 0, 0, 0, 0)])
+            self._send([self.mav.command_long_encode(
+                self.mav.srcSystem, mavlink.MAV_COMP_ID_AUTOPILOT1, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
+                mavlink.MAVLINK_MSG_ID_HIGHRES_IMU, 1e6 / self.cfg.request_imu, 0, 0, 0, 0, 0)])
             log.info("asked for HIGHRES_IMU at %.0f Hz", self.cfg.request_imu)
+
+    def _sys_status(self, now: float) -> mavlink.MAVLink_message:
+        """SYS_STATUS: IMU sensor health, load, and rejection/drop counters."""
+        cpu, wall = time.process_time() - self._cpu0[0], now - self._cpu0[1]
+        self._cpu0 = (time.process_time(), now)
+        load = min(1000, int(1000 * cpu / wall)) if wall > 0 else 0
+        sensors = mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+        healthy = sensors if self.pipeline.engine.state is State.NAVIGATING and not self.pipeline.engine.degraded else 0
+        rejected = sum(self.pipeline.ingest.rejected.values()) + sum(
+            v for k, v in self.counters.items() if k.startswith("rejected_"))
+        dropped = self.counters["flood_dropped"]
+        total = self.summary.messages + dropped
+        drop_rate = int(10000 * dropped / total) if total else 0
+        return self.mav.sys_status_encode(sensors, sensors, healthy, load, 0, -1, -1, min(drop_rate, 10000),
+                                          min(rejected, 65535), min(dropped, 65535),
+                                          min(self.pipeline.engine.counters["gaps_long"], 65535),
+                                          min(self.pipeline.engine.counters["restarts"], 65535), 0)
+
+    def _flood_relief(self) -> None:
+        """Drop the socket's backlog when input has waited longer than MAX_LAG (kernel timestamps)."""
+        if self.master.age > MAX_LAG:
+            dropped = self.master.discard(1_000_000)
+            self.master.age = 0.0
+            if dropped:
+                self.counters["flood_dropped"] += dropped
+                log.warning("input beyond capacity: dropped %d datagrams older than %.1f s", dropped, MAX_LAG)
 
     def run(self, stop: threading.Event) -> Summary:
         """Serve until ``stop`` is set; flush the side outputs and return the summary."""
-        fd = self.master.fd if getattr(self.master, "fd", None) is not None else None
+        fd = self.master.fileno()
         try:
             while not stop.is_set():
-                msg = self.master.recv_msg()
-                if msg is None:
+                batch, _ = self.master.receive(BATCH)
+                if not batch:
                     self._periodic()
                     if fd is not None:
                         select.select([fd], [], [], 0.05)
                     else:
                         time.sleep(0.002)
                     continue
-                self._handle(msg)
+                for msg, addr in batch:
+                    self._handle(msg, addr)
+                self._flood_relief()
                 self._periodic()
         finally:
             self.close()
         return self.summary
 
     def close(self) -> None:
-        """Flush and close the tlog, the solution file and the links."""
+        """Flush and close the tlog, the solution file, the recording and the links."""
         if self._tlog is not None:
             self._tlog.close()
             self._tlog = None
@@ -179,11 +264,12 @@ class Service:
                 self.pipeline.take_events()
                 self.pipeline.recorder.close()  # type: ignore[attr-defined]
             except Exception as exc:  # a recording failure must never take navigation down
-                log.error("closing the Rerun recording failed: %s", exc)
+                self._optional_failed("recording", exc)
             self.pipeline.recorder = None
-        c = dict(self.pipeline.counters)
+        c = dict(self.counters)
+        c.update(self.pipeline.counters)
         c.update({f"rejected_{k}": v for k, v in self.pipeline.ingest.rejected.items()})
-        c.update(self.pipeline.engine.counters)
+        c.update({k: v for k, v in self.pipeline.engine.counters.items() if k != "outputs_since_health"})
         c["imu_accepted"] = self.pipeline.ingest.accepted
         self.summary.counters = c
         self.summary.state = self.pipeline.engine.state.value

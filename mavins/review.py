@@ -1,0 +1,258 @@
+"""Render a Rerun recording to a PNG with Rerun's own native viewer, headless.
+
+The viewer runs under a private Xvfb X server and draws with Vulkan in
+software (Mesa's lavapipe), so no GPU and no desktop are needed::
+
+    Xvfb :N -screen 0 1920x1080x24
+    WGPU_BACKEND=vulkan DISPLAY=:N XDG_RUNTIME_DIR=<private dir> \\
+        rerun FILE.rrd --renderer vulkan --port 0 --window-size 1600x900 --screenshot-to OUT.png
+
+Debian packages: ``xvfb`` and ``mesa-vulkan-drivers`` (with ``libvulkan1``);
+``scripts/install_viewer_deps.sh`` installs them.
+
+Command line (until ``mavins review`` exists)::
+
+    python -m mavins.review FILE.rrd --screenshot OUT.png [--size 1600x900] [--timeout 120]
+"""
+
+from __future__ import annotations
+
+import argparse
+import ctypes.util
+import glob
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+PACKAGES = "xvfb mesa-vulkan-drivers libvulkan1"
+INSTALL_HINT = f"install them with: apt-get install -y {PACKAGES} (or scripts/install_viewer_deps.sh)"
+ICD_DIRS = ("/usr/share/vulkan/icd.d", "/etc/vulkan/icd.d", "/usr/local/share/vulkan/icd.d")
+XVFB_SCREEN = "1920x1080x24"
+
+
+class ViewerUnavailable(RuntimeError):
+    """Something the headless viewer needs is not installed (the message says which package)."""
+
+
+class ScreenshotError(RuntimeError):
+    """The viewer ran but did not produce the picture (the message has the end of its log)."""
+
+
+def rerun_binary() -> list[str]:
+    """Command that starts the native viewer of the installed rerun-sdk."""
+    try:
+        import rerun_cli  # the wheel's package that holds the viewer binary
+
+        exe = Path(rerun_cli.__file__).with_name("rerun")
+        if exe.is_file() and os.access(exe, os.X_OK):
+            return [str(exe)]
+    except ImportError:
+        pass
+    beside = Path(sys.executable).with_name("rerun")
+    if beside.is_file():
+        return [str(beside)]
+    found = shutil.which("rerun")
+    if found:
+        return [found]
+    raise ViewerUnavailable("the Rerun viewer binary was not found: install rerun-sdk (pip install rerun-sdk)")
+
+
+def software_vulkan_icd() -> str:
+    """Path of Mesa's software Vulkan driver manifest (lavapipe); raises if it or the loader is missing."""
+    if ctypes.util.find_library("vulkan") is None and not glob.glob("/usr/lib/*/libvulkan.so.1"):
+        raise ViewerUnavailable(f"the Vulkan loader (libvulkan.so.1) is missing: {INSTALL_HINT}")
+    for d in ICD_DIRS:
+        hits = sorted(glob.glob(os.path.join(d, "lvp_icd*.json")))
+        if hits:
+            return hits[0]
+    raise ViewerUnavailable(
+        f"Mesa's software Vulkan driver (lavapipe, lvp_icd*.json in {ICD_DIRS[0]}) is missing: {INSTALL_HINT}")
+
+
+def check_dependencies() -> tuple[str, str]:
+    """(Xvfb path, lavapipe ICD path); raises :class:`ViewerUnavailable` naming the missing package."""
+    xvfb = shutil.which("Xvfb")
+    if xvfb is None:
+        raise ViewerUnavailable(f"Xvfb (Debian package xvfb) is not installed: {INSTALL_HINT}")
+    return xvfb, software_vulkan_icd()
+
+
+def _start_xvfb(xvfb: str, log_path: Path, timeout: float = 10.0) -> tuple[subprocess.Popen[bytes], int]:
+    """Start Xvfb on the first free display number (``-displayfd``); return (process, number)."""
+    r, w = os.pipe()
+    with open(log_path, "wb") as log:
+        proc = subprocess.Popen(
+            [xvfb, "-displayfd", str(w), "-screen", "0", XVFB_SCREEN, "-nolisten", "tcp", "-noreset"],
+            stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, pass_fds=(w,), start_new_session=True)
+    os.close(w)
+    data = b""
+    deadline = time.monotonic() + timeout
+    try:
+        os.set_blocking(r, False)
+        while not data.endswith(b"\n") and time.monotonic() < deadline and proc.poll() is None:
+            try:
+                chunk = os.read(r, 64)
+            except BlockingIOError:
+                time.sleep(0.02)
+                continue
+            if not chunk:
+                break
+            data += chunk
+    finally:
+        os.close(r)
+    if not data.strip().isdigit():
+        _stop(proc)
+        tail = log_path.read_text(errors="replace")[-2000:]
+        raise ScreenshotError(f"Xvfb did not start (exit code {proc.returncode}):\n{tail}")
+    return proc, int(data.strip())
+
+
+def _stop(proc: subprocess.Popen[bytes], grace: float = 5.0) -> None:
+    """Terminate a process group we started, then kill it if it lingers."""
+    if proc.poll() is not None:
+        return
+    try:
+        os.killpg(proc.pid, signal.SIGTERM)
+    except ProcessLookupError:
+        return
+    try:
+        proc.wait(grace)
+    except subprocess.TimeoutExpired:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        proc.wait(grace)
+
+
+def _resize(png: Path, size: tuple[int, int]) -> None:
+    """Scale the picture to ``size`` pixels if the viewer drew it at another scale (HiDPI)."""
+    from PIL import Image  # a dependency of rerun-sdk
+
+    with Image.open(png) as im:
+        if im.size == tuple(size):
+            return
+        out = im.convert("RGB").resize(size, Image.LANCZOS)
+    out.save(png, optimize=True)
+
+
+def screenshot(rrd: Path, out_png: Path, size: tuple[int, int] = (1600, 900), timeout: float = 120,
+               *, native_scale: bool = False) -> None:
+    """Render the recording ``rrd`` to ``out_png`` with Rerun's native viewer, headless.
+
+    The viewer opens the file with the recording's own blueprint (layout) in a
+    window of ``size`` logical points, under a private Xvfb server with Vulkan
+    software rendering, saves a screenshot once the data has loaded and quits.
+    The viewer draws at 2 pixels per point; the PNG is scaled to ``size``
+    pixels unless ``native_scale`` is set. The time cursor is wherever the
+    recording's blueprint puts it (its play state), so time-based views (3D,
+    text log) show the data up to that time; time series show the whole run.
+
+    Environment: ``WGPU_BACKEND=vulkan``, ``DISPLAY`` of the started Xvfb,
+    a private ``XDG_RUNTIME_DIR`` (mode 700) and the lavapipe driver only
+    (``VK_DRIVER_FILES``/``VK_ICD_FILENAMES``), so the result does not depend
+    on a GPU. The viewer's own gRPC port is chosen by the system
+    (``--port 0``, bound to 127.0.0.1). Xvfb and the viewer are stopped on
+    return, also on error or timeout.
+
+    Raises ``FileNotFoundError`` (no recording), :class:`ViewerUnavailable`
+    (Xvfb, the Vulkan loader or lavapipe missing: the message names the Debian
+    packages ``xvfb`` and ``mesa-vulkan-drivers``) or :class:`ScreenshotError`
+    (the viewer failed or timed out: the message holds the end of its log).
+    """
+    rrd = Path(rrd)
+    out_png = Path(out_png)
+    if not rrd.is_file():
+        raise FileNotFoundError(f"{rrd}: no such recording")
+    w, h = (int(size[0]), int(size[1]))
+    if w < 200 or h < 150:
+        raise ValueError(f"window size {w}x{h} is too small")
+    xvfb, icd = check_dependencies()
+    cmd = rerun_binary()
+    out_png.parent.mkdir(parents=True, exist_ok=True)
+    out_png.unlink(missing_ok=True)
+    with tempfile.TemporaryDirectory(prefix="mavins-review-") as tmp:
+        tmpdir = Path(tmp)
+        runtime = tmpdir / "xdg-runtime"
+        runtime.mkdir(mode=0o700)
+        os.chmod(runtime, 0o700)
+        viewer_log = tmpdir / "viewer.log"
+        xserver, display = _start_xvfb(xvfb, tmpdir / "xvfb.log")
+        viewer: subprocess.Popen[bytes] | None = None
+        try:
+            env = dict(os.environ)
+            env.update({
+                "DISPLAY": f":{display}",
+                "WGPU_BACKEND": "vulkan",
+                "XDG_RUNTIME_DIR": str(runtime),
+                "VK_DRIVER_FILES": icd,
+                "VK_ICD_FILENAMES": icd,
+                "RUST_LOG": env.get("RUST_LOG", "warn"),
+            })
+            env.pop("WAYLAND_DISPLAY", None)
+            args = [*cmd, str(rrd.resolve()), "--renderer", "vulkan", "--port", "0", "--bind", "127.0.0.1",
+                    "--window-size", f"{w}x{h}", "--screenshot-to", str(out_png.resolve())]
+            with open(viewer_log, "wb") as log:
+                viewer = subprocess.Popen(args, env=env, cwd=tmpdir, stdin=subprocess.DEVNULL, stdout=log,
+                                          stderr=subprocess.STDOUT, start_new_session=True)
+            try:
+                rc = viewer.wait(timeout)
+            except subprocess.TimeoutExpired:
+                raise ScreenshotError(f"the viewer took longer than {timeout:g} s:\n{_tail(viewer_log)}") from None
+            if rc != 0 or not out_png.is_file() or out_png.stat().st_size == 0:
+                raise ScreenshotError(f"the viewer exited with code {rc} without writing {out_png}:\n"
+                                      f"{_tail(viewer_log)}")
+        finally:
+            if viewer is not None:
+                _stop(viewer)
+            _stop(xserver)
+    if not native_scale:
+        _resize(out_png, (w, h))
+
+
+def _tail(path: Path, n: int = 3000) -> str:
+    try:
+        return path.read_text(errors="replace")[-n:]
+    except OSError:
+        return "(no log)"
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = text.lower().split("x")
+        return int(w), int(h)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, e.g. 1600x900, not {text!r}") from None
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m mavins.review FILE.rrd --screenshot OUT.png``: 0 on success, 1 on failure, 2 on bad usage."""
+    p = argparse.ArgumentParser(prog="python -m mavins.review",
+                                description="Render a Rerun recording to a PNG with the native viewer, headless "
+                                            "(Xvfb + Vulkan software rendering).")
+    p.add_argument("rrd", type=Path, metavar="FILE.rrd", help="recording to render")
+    p.add_argument("--screenshot", type=Path, required=True, metavar="OUT.png", help="PNG to write")
+    p.add_argument("--size", type=_size, default=(1600, 900), metavar="WxH", help="window size (default 1600x900)")
+    p.add_argument("--timeout", type=float, default=120.0, metavar="S", help="give up after S seconds (default 120)")
+    p.add_argument("--native-scale", action="store_true", help="keep the viewer's pixel scale (2x the window size)")
+    args = p.parse_args(argv)
+    try:
+        screenshot(args.rrd, args.screenshot, args.size, args.timeout, native_scale=args.native_scale)
+    except (FileNotFoundError, ValueError) as exc:
+        print(f"{p.prog}: error: {exc}", file=sys.stderr)
+        return 2
+    except (ViewerUnavailable, ScreenshotError) as exc:
+        print(f"{p.prog}: error: {exc}", file=sys.stderr)
+        return 1
+    print(f"{p.prog}: wrote {args.screenshot}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
