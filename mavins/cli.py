@@ -359,7 +359,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
     if args.duration:
-        threading.Timer(args.duration, stop.set).start()
+        timer = threading.Timer(args.duration, stop.set)
+        timer.daemon = True  # a signal may end the run first; never wait for the timer
+        timer.start()
     print(f"mavins run: listening on {args.master}", file=sys.stderr)
     summary = svc.run(stop)
     for line in summary.lines():

@@ -142,17 +142,56 @@ def _resize(png: Path, size: tuple[int, int]) -> None:
     out.save(png, optimize=True)
 
 
+def review_blueprint(rrd: Path, out_rbl: Path) -> None:
+    """Write ``out_rbl``: the recording's stored blueprint, with the time cursor at the end and side panels hidden.
+
+    The layout (containers, views, shares) is copied chunk by chunk from the
+    blueprint stored in ``rrd``; on top of it the time panel is set to
+    *following* (cursor on the newest data, so the 3D view and the text log
+    show the whole run) and the blueprint and selection panels are hidden.
+    Without a stored blueprint the viewer's automatic layout is used.
+    """
+    import rerun as rr
+    import rerun.blueprint as rrb
+    from rerun.chunk import RrdReader
+
+    reader = RrdReader(str(rrd))
+    recs = reader.recordings()
+    if not recs:
+        raise ScreenshotError(f"{rrd}: no recording in the file")
+    app = recs[0].application_id
+    parts = (rrb.TimePanel(state="collapsed", play_state="following"), rrb.BlueprintPanel(state="hidden"),
+             rrb.SelectionPanel(state="hidden"))
+    stored = [b for b in reader.blueprints() if b.application_id == app]
+    if not stored:
+        rrb.Blueprint(*parts, auto_layout=True, auto_views=True).save(app, str(out_rbl))
+        return
+    from rerun import bindings  # pinned rerun-sdk: the same calls Blueprint.save() makes
+
+    stream = rr.RecordingStream._from_native(bindings.new_blueprint(
+        application_id=app, make_default=False, make_thread_default=False, default_enabled=True))
+    stream.send_chunks(list(reader.stream(store=stored[-1])))
+    stream.set_time("blueprint", sequence=2**62)  # after every stored row: these values win
+    for part in parts:
+        part._log_to_stream(stream)
+    bindings.save_blueprint(str(out_rbl), stream.to_native())
+
+
 def screenshot(rrd: Path, out_png: Path, size: tuple[int, int] = (1600, 900), timeout: float = 120,
-               *, native_scale: bool = False) -> None:
+               *, at_end: bool = True, native_scale: bool = False) -> None:
     """Render the recording ``rrd`` to ``out_png`` with Rerun's native viewer, headless.
 
     The viewer opens the file with the recording's own blueprint (layout) in a
     window of ``size`` logical points, under a private Xvfb server with Vulkan
     software rendering, saves a screenshot once the data has loaded and quits.
     The viewer draws at 2 pixels per point; the PNG is scaled to ``size``
-    pixels unless ``native_scale`` is set. The time cursor is wherever the
-    recording's blueprint puts it (its play state), so time-based views (3D,
-    text log) show the data up to that time; time series show the whole run.
+    pixels unless ``native_scale`` is set.
+
+    With ``at_end`` (the default) the stored layout is loaded again from a
+    temporary ``.rbl`` (see :func:`review_blueprint`) with the time cursor on
+    the newest data and the side panels hidden, so the 3D view and the text
+    log show the whole run; without it the picture is the viewer's opening
+    state (cursor near the start, where the stored blueprint puts it).
 
     Environment: ``WGPU_BACKEND=vulkan``, ``DISPLAY`` of the started Xvfb,
     a private ``XDG_RUNTIME_DIR`` (mode 700) and the lavapipe driver only
@@ -196,7 +235,12 @@ def screenshot(rrd: Path, out_png: Path, size: tuple[int, int] = (1600, 900), ti
                 "RUST_LOG": env.get("RUST_LOG", "warn"),
             })
             env.pop("WAYLAND_DISPLAY", None)
-            args = [*cmd, str(rrd.resolve()), "--renderer", "vulkan", "--port", "0", "--bind", "127.0.0.1",
+            files = [str(rrd.resolve())]
+            if at_end:  # after the recording: the viewer activates the blueprint loaded last
+                rbl = tmpdir / "review.rbl"
+                review_blueprint(rrd, rbl)
+                files.append(str(rbl))
+            args = [*cmd, *files, "--renderer", "vulkan", "--port", "0", "--bind", "127.0.0.1",
                     "--window-size", f"{w}x{h}", "--screenshot-to", str(out_png.resolve())]
             with open(viewer_log, "wb") as log:
                 viewer = subprocess.Popen(args, env=env, cwd=tmpdir, stdin=subprocess.DEVNULL, stdout=log,
@@ -240,10 +284,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--screenshot", type=Path, required=True, metavar="OUT.png", help="PNG to write")
     p.add_argument("--size", type=_size, default=(1600, 900), metavar="WxH", help="window size (default 1600x900)")
     p.add_argument("--timeout", type=float, default=120.0, metavar="S", help="give up after S seconds (default 120)")
+    p.add_argument("--as-opened", action="store_true",
+                   help="the viewer's opening state (cursor near the start, side panels as stored) instead of "
+                        "the whole run with side panels hidden")
     p.add_argument("--native-scale", action="store_true", help="keep the viewer's pixel scale (2x the window size)")
     args = p.parse_args(argv)
     try:
-        screenshot(args.rrd, args.screenshot, args.size, args.timeout, native_scale=args.native_scale)
+        screenshot(args.rrd, args.screenshot, args.size, args.timeout, at_end=not args.as_opened,
+                   native_scale=args.native_scale)
     except (FileNotFoundError, ValueError) as exc:
         print(f"{p.prog}: error: {exc}", file=sys.stderr)
         return 2
