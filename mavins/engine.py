@@ -48,7 +48,8 @@ class EngineConfig:
     vertical: str = "free"
     motion_gyro: float = 0.1  # rad/s: a sample above this restarts the alignment
     motion_accel: float = 1.5  # m/s^2: |f| - g beyond this restarts the alignment
-    max_gap: float = 1.0  # s: a longer gap in sensor time degrades the solution
+    max_gap: float = 1.0  # s: a longer gap in sensor time is not integrated; the solution is degraded
+    restart_gap: float = 60.0  # s: a longer jump forward (e.g. boot time -> UNIX time) restarts alignment
     gyro_bias: str = "estimate"  # "estimate": mean gyro minus Earth rate over the static window; "none"
 
 
@@ -80,6 +81,7 @@ class Engine:
     _t_align0: float = field(init=False, default=0.0)
     _last_out: int = field(init=False, default=-1)
     _last_t: float | None = field(init=False, default=None)
+    _dt_nominal: float | None = field(init=False, default=None)
     _gyro: np.ndarray = field(init=False, default_factory=lambda: np.zeros(3))
     gyro_bias: np.ndarray = field(init=False, default_factory=lambda: np.zeros(3))
     _row: np.ndarray = field(init=False, default_factory=lambda: np.zeros(sd.OUT_SIZE))
@@ -118,19 +120,39 @@ class Engine:
         self._s = None
         self._acc.clear()
         self._last_t = None
+        self._dt_nominal = None
         self._last_out = -1
         self.counters["restarts"] += 1
         self._set_state(State.WAITING if self._pos is None else State.ALIGNING, reason)
 
     def on_imu(self, smp: ImuSample) -> Output | None:
-        """Feed one accepted sample; returns an output set when one is due."""
+        """Feed one accepted sample; returns an output set when one is due.
+
+        Gaps in sensor time: up to ``max_gap`` they are bridged (counted when
+        over twice the nominal interval); longer ones are not integrated (the
+        sample covers only the nominal interval) and mark the solution
+        degraded; beyond ``restart_gap`` the alignment starts over.
+        """
         if self._last_t is not None:
             gap = smp.t - self._last_t
-            if gap > self.cfg.max_gap:
+            nominal = self._dt_nominal
+            if gap > self.cfg.restart_gap:
+                self.counters["time_jumps"] += 1
+                self.restart(f"sensor time jumped {gap:.1f} s forward")
+            elif gap > self.cfg.max_gap:
                 self.counters["gaps_long"] += 1
-                if self.state is State.NAVIGATING and not self.degraded:
-                    self.degraded = True
-                    self._event("WARNING", f"sensor-time gap of {gap:.3f} s: solution degraded")
+                if self.state is State.NAVIGATING:
+                    if not self.degraded:
+                        self.degraded = True
+                        self._event("WARNING", f"sensor-time gap of {gap:.3f} s not integrated: solution degraded")
+                    self._skip_gap(smp.t - (nominal or 0.0))
+                elif self.state is State.ALIGNING and self._acc:
+                    self._acc.clear()
+                    self._event("WARNING", f"sensor-time gap of {gap:.3f} s during alignment: restarting it")
+            elif nominal is not None and gap > 2.0 * nominal:
+                self.counters["gaps_bridged"] += 1
+            if 0.0 < gap <= self.cfg.max_gap:
+                self._dt_nominal = gap if nominal is None else nominal + 0.05 * (gap - nominal)
         self._last_t = smp.t
         if self.state is State.WAITING:
             if self._pos is None:
@@ -140,6 +162,14 @@ class Engine:
             self._align_step(smp)
             return None
         return self._nav_step(smp)
+
+    def _skip_gap(self, t_resume: float) -> None:
+        """Move the kernel's clock to ``t_resume`` without integrating the gap."""
+        s = self._s
+        if s is None:
+            return
+        s[sd.S_TJ] = max(s[sd.S_TJ], t_resume)
+        s[sd.S_HAVEP] = 0.0  # sampled rates: the next sample opens a fresh interval
 
     def _align_step(self, smp: ImuSample) -> None:
         g = np.asarray(smp.gyro)
