@@ -82,8 +82,9 @@ class Engine:
     _last_out: int = field(init=False, default=-1)
     _last_t: float | None = field(init=False, default=None)
     _dt_nominal: float | None = field(init=False, default=None)
-    _gyro: np.ndarray = field(init=False, default_factory=lambda: np.zeros(3))
+    _gyro_last: tuple[float, float, float] = field(init=False, default=(0.0, 0.0, 0.0))
     gyro_bias: np.ndarray = field(init=False, default_factory=lambda: np.zeros(3))
+    _bias: tuple[float, float, float] = field(init=False, default=(0.0, 0.0, 0.0))
     _row: np.ndarray = field(init=False, default_factory=lambda: np.zeros(sd.OUT_SIZE))
 
     def __post_init__(self) -> None:
@@ -200,6 +201,7 @@ class Engine:
         self._acc.clear()
         self.degraded = False
         self.gyro_bias = np.zeros(3)
+        self._bias = (0.0, 0.0, 0.0)
         if self.cfg.gyro_bias == "estimate" and source != "gyrocompass":
             # at rest the gyros read C_n^b w_ie^n; the rest is bias (zero-rate calibration)
             c_bn = sd.euler_to_dcm(roll, pitch, yaw)
@@ -209,6 +211,7 @@ class Engine:
             f"aligned over {smp.t - self._t_align0:.1f} s: roll {math.degrees(roll):.2f} pitch "
             f"{math.degrees(pitch):.2f} heading {math.degrees(yaw):.2f} deg from {source}",
         )
+        self._bias = (float(self.gyro_bias[0]), float(self.gyro_bias[1]), float(self.gyro_bias[2]))
         if self.gyro_bias.any():
             self._event("INFO", "gyro bias estimated at rest: "
                         + " ".join(f"{math.degrees(b) * 3600:.1f}" for b in self.gyro_bias) + " deg/h")
@@ -232,17 +235,19 @@ class Engine:
         return align.gyrocompass(w_mean, roll, pitch), "gyrocompass"
 
     def _nav_step(self, smp: ImuSample) -> Output | None:
-        self._gyro = np.asarray(smp.gyro) - self.gyro_bias
-        r = sd.push_rate(self._s, self._kcfg, smp.t, self._gyro, np.asarray(smp.accel))  # type: ignore[arg-type]
+        g, f, b = smp.gyro, smp.accel, self._bias
+        gx, gy, gz = g[0] - b[0], g[1] - b[1], g[2] - b[2]
+        self._gyro_last = (gx, gy, gz)
+        s = self._s
+        r = sd.push_rate_scalars(s, self._kcfg, smp.t, gx, gy, gz, f[0], f[1], f[2])  # type: ignore[arg-type]
         if r != 1:
             return None
-        t_sol = self._s[sd.S_T]  # type: ignore[index]
-        k = math.floor(t_sol * self.cfg.rate + 1e-9)
+        k = math.floor(s[sd.S_T] * self.cfg.rate + 1e-9)  # type: ignore[index]
         if k <= self._last_out:
             return None
         self._last_out = k
-        sd.solution_row(self._s, self._kcfg, self._row)  # type: ignore[arg-type]
-        return Output(self._row.copy(), self._gyro.copy(), self._pos, self.degraded)  # type: ignore[arg-type]
+        sd.solution_row(s, self._kcfg, self._row)  # type: ignore[arg-type]
+        return Output(self._row.copy(), np.array(self._gyro_last), self._pos, self.degraded)  # type: ignore[arg-type]
 
     # -- events ----------------------------------------------------------------
     def _set_state(self, state: State, why: str) -> None:
@@ -269,6 +274,7 @@ def warm_up() -> None:
         cfg = sd.make_config(imu_rates=rates)
         for i in range(1, 5):
             sd.push_rate(s, cfg, 0.01 * i, np.zeros(3), np.array([0.0, 0.0, -9.8]))
+            sd.push_rate_scalars(s, cfg, 0.01 * i + 0.005, 0.0, 0.0, 0.0, 0.0, 0.0, -9.8)
     sd.solution_row(s, cfg, np.zeros(sd.OUT_SIZE))
     sd.euler_to_dcm(0.0, 0.0, 0.0)
     earth.earth_rate_n(0.8)

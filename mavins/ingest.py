@@ -118,11 +118,14 @@ class Ingest:
             mag = tuple(v * 1e-3 for v in (msg.xmag, msg.ymag, msg.zmag))  # type: ignore[attr-defined]
         if mag is not None and not any(mag):
             mag = None
-        values = (*acc, *gyr)
-        if not all(math.isfinite(v) for v in values):
+        ax, ay, az = acc
+        gx, gy, gz = gyr
+        isfinite = math.isfinite
+        if not (isfinite(ax) and isfinite(ay) and isfinite(az) and isfinite(gx) and isfinite(gy) and isfinite(gz)):
             self.reject("non_finite")
             return None
-        if any(abs(v) > cfg.max_accel for v in acc) or any(abs(v) > cfg.max_gyro for v in gyr):
+        ma, mg = cfg.max_accel, cfg.max_gyro
+        if abs(ax) > ma or abs(ay) > ma or abs(az) > ma or abs(gx) > mg or abs(gy) > mg or abs(gz) > mg:
             self.reject("out_of_range")
             return None
         if self.last_t is not None:

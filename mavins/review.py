@@ -232,7 +232,8 @@ def screenshot(rrd: Path, out_png: Path, size: tuple[int, int] = (1600, 900), ti
                 "XDG_RUNTIME_DIR": str(runtime),
                 "VK_DRIVER_FILES": icd,
                 "VK_ICD_FILENAMES": icd,
-                "RUST_LOG": env.get("RUST_LOG", "warn"),
+                # warnings become toasts drawn over the views ("running in Docker", "software rasterizer")
+                "RUST_LOG": env.get("RUST_LOG", "error"),
             })
             env.pop("WAYLAND_DISPLAY", None)
             files = [str(rrd.resolve())]

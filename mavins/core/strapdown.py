@@ -478,6 +478,18 @@ def push_rate(s: np.ndarray, cfg: np.ndarray, t: float, w: np.ndarray, f: np.nda
 
 
 @kernel
+def push_rate_scalars(
+    s: np.ndarray, cfg: np.ndarray, t: float, wx: float, wy: float, wz: float, fx: float, fy: float, fz: float
+) -> int:
+    """:func:`push_rate` with the sample as scalars (cheaper to call from Python, same update)."""
+    w = np.empty(3)
+    f = np.empty(3)
+    w[0], w[1], w[2] = wx, wy, wz
+    f[0], f[1], f[2] = fx, fy, fz
+    return push_rate(s, cfg, t, w, f)
+
+
+@kernel
 def run_increments(
     s: np.ndarray, cfg: np.ndarray, t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray, out: np.ndarray
 ) -> int:
