@@ -250,13 +250,19 @@ def rotvec_to_quat(phi: np.ndarray) -> np.ndarray:
     """
     s2 = phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2]
     s = np.sqrt(s2)
-    q = np.empty(4)
     if s < SMALL_ANGLE:
         c = 1.0 - s2 / 8.0 + s2 * s2 / 384.0
         k = 0.5 - s2 / 48.0 + s2 * s2 / 3840.0
     else:
         c = np.cos(0.5 * s)
         k = np.sin(0.5 * s) / s
+    return quat_from_coeffs(phi, c, k)
+
+
+@kernel
+def quat_from_coeffs(phi: np.ndarray, c: float, k: float) -> np.ndarray:
+    """``[c, k phi]``: the quaternion form shared by the exact and truncated updates."""
+    q = np.empty(4)
     q[0] = c
     q[1] = k * phi[0]
     q[2] = k * phi[1]
@@ -298,7 +304,17 @@ def rotvec_to_dcm(phi: np.ndarray) -> np.ndarray:
         s = np.sqrt(s2)
         a1 = np.sin(s) / s
         a2 = (1.0 - np.cos(s)) / s2
-    # I + a1 [phi x] + a2 [phi x]^2, with [phi x]^2 = phi phi^T - s^2 I
+    return dcm_from_coeffs(phi, a1, a2)
+
+
+@kernel
+def dcm_from_coeffs(phi: np.ndarray, a1: float, a2: float) -> np.ndarray:
+    """``I + a1 [phi x] + a2 [phi x]^2`` (using ``[phi x]^2 = phi phi^T - |phi|^2 I``).
+
+    The DCM form shared by the exact and truncated updates ([TW11] 11.2.1).
+    """
+    x, y, z = phi[0], phi[1], phi[2]
+    s2 = x * x + y * y + z * z
     c = np.empty((3, 3))
     c[0, 0] = 1.0 + a2 * (x * x - s2)
     c[0, 1] = -a1 * z + a2 * x * y

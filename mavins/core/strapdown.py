@@ -45,6 +45,7 @@ from .coning import (
 from .jit import kernel
 from .rotation import (
     cross,
+    dcm_from_coeffs,
     dcm_to_euler,
     dcm_to_quat,
     mat_mul,
@@ -52,11 +53,11 @@ from .rotation import (
     euler_to_dcm,
     orthonormalize,
     quat_canonical,
+    quat_from_coeffs,
     quat_mul,
     quat_to_dcm,
     rotvec_to_dcm,
     rotvec_to_quat,
-    skew,
 )
 
 # --- configuration vector -------------------------------------------------
@@ -239,12 +240,7 @@ def body_update_quat(sigma: np.ndarray, order: int) -> np.ndarray:
         ac, as_ = 1.0 - s2 / 8.0, 0.5 - s2 / 48.0
     else:
         ac, as_ = 1.0 - s2 / 8.0 + s2 * s2 / 384.0, 0.5 - s2 / 48.0
-    r = np.empty(4)
-    r[0] = ac
-    r[1] = as_ * sigma[0]
-    r[2] = as_ * sigma[1]
-    r[3] = as_ * sigma[2]
-    return r
+    return quat_from_coeffs(sigma, ac, as_)
 
 
 @kernel
@@ -266,8 +262,7 @@ def body_update_dcm(sigma: np.ndarray, order: int) -> np.ndarray:
         a1, a2 = 1.0 - s2 / 6.0, 0.5
     else:
         a1, a2 = 1.0 - s2 / 6.0, 0.5 - s2 / 24.0
-    k = skew(sigma)
-    return np.eye(3) + a1 * k + a2 * mat_mul(k, k)
+    return dcm_from_coeffs(sigma, a1, a2)
 
 
 @kernel
