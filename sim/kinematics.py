@@ -215,6 +215,7 @@ def integrate(
     consts: np.ndarray,
     linvib: np.ndarray,
     use_earth: bool,
+    breaks: np.ndarray,
     dtheta: np.ndarray,
     dv: np.ndarray,
     pos: np.ndarray,
@@ -224,42 +225,59 @@ def integrate(
     Position: classical RK4 on ``L' = v_N/(R_N+h)``, ``lon' = v_E/((R_E+h) cos L)``,
     ``h' = -v_D`` at ``substeps`` per sample. Increments: 5-point Gauss-Legendre
     quadrature of the IMU rates on each sub-step, with latitude and height at the
-    nodes from a cubic Hermite interpolation of the RK4 solution. With
-    ``use_earth`` false, position is the flat NED offset (north m, east m, -h).
+    nodes from a cubic Hermite interpolation of the RK4 solution. Sample
+    intervals are first split at every channel piece boundary in ``breaks``
+    (sorted), so each quadrature spans one smooth piece. With ``use_earth``
+    false, position is the flat NED offset (north m, east m, -h).
     """
     lat, lon, h = lat0, lon0, h0
     tp = t0
+    nb = breaks.shape[0]
+    edges = np.empty(nb + 2)
     for i in range(t.shape[0]):
-        hstep = (t[i] - tp) / substeps
+        ti = t[i]
+        k0 = np.searchsorted(breaks, tp, side="right")
+        k1 = np.searchsorted(breaks, ti, side="left")
+        ne = 0
+        edges[ne] = tp
+        ne += 1
+        for k in range(k0, k1):
+            edges[ne] = breaks[k]
+            ne += 1
+        edges[ne] = ti
+        ne += 1
         acc_th = np.zeros(3)
         acc_v = np.zeros(3)
-        for j in range(substeps):
-            ta = tp + j * hstep
-            y0 = np.array([lat, lon, h])
-            k1 = _pos_rate(ta, y0, starts, durs, coefs, counts, linvib, use_earth)
-            k2 = _pos_rate(ta + 0.5 * hstep, y0 + 0.5 * hstep * k1, starts, durs, coefs, counts, linvib, use_earth)
-            k3 = _pos_rate(ta + 0.5 * hstep, y0 + 0.5 * hstep * k2, starts, durs, coefs, counts, linvib, use_earth)
-            k4 = _pos_rate(ta + hstep, y0 + hstep * k3, starts, durs, coefs, counts, linvib, use_earth)
-            y1 = y0 + hstep / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-            m0 = k1
-            m1 = _pos_rate(ta + hstep, y1, starts, durs, coefs, counts, linvib, use_earth)
-            for g in range(5):
-                x = GL_NODES[g]
-                h00 = 2 * x**3 - 3 * x**2 + 1
-                h10 = x**3 - 2 * x**2 + x
-                h01 = -2 * x**3 + 3 * x**2
-                h11 = x**3 - x**2
-                yn = h00 * y0 + h10 * hstep * m0 + h01 * y1 + h11 * hstep * m1
-                w_s, f_s = imu_rates(ta + x * hstep, yn[0], yn[2], starts, durs, coefs, counts, vib, consts, linvib, use_earth)
-                acc_th += GL_WEIGHTS[g] * hstep * w_s
-                acc_v += GL_WEIGHTS[g] * hstep * f_s
-            lat, lon, h = y1[0], y1[1], y1[2]
+        for piece in range(ne - 1):
+            ta0 = edges[piece]
+            hstep = (edges[piece + 1] - ta0) / substeps
+            for j in range(substeps):
+                ta = ta0 + j * hstep
+                y0 = np.array([lat, lon, h])
+                k1v = _pos_rate(ta, y0, starts, durs, coefs, counts, linvib, use_earth)
+                k2v = _pos_rate(ta + 0.5 * hstep, y0 + 0.5 * hstep * k1v, starts, durs, coefs, counts, linvib, use_earth)
+                k3v = _pos_rate(ta + 0.5 * hstep, y0 + 0.5 * hstep * k2v, starts, durs, coefs, counts, linvib, use_earth)
+                k4v = _pos_rate(ta + hstep, y0 + hstep * k3v, starts, durs, coefs, counts, linvib, use_earth)
+                y1 = y0 + hstep / 6.0 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v)
+                m1 = _pos_rate(ta + hstep, y1, starts, durs, coefs, counts, linvib, use_earth)
+                for g in range(5):
+                    x = GL_NODES[g]
+                    h00 = 2 * x**3 - 3 * x**2 + 1
+                    h10 = x**3 - 2 * x**2 + x
+                    h01 = -2 * x**3 + 3 * x**2
+                    h11 = x**3 - x**2
+                    yn = h00 * y0 + h10 * hstep * k1v + h01 * y1 + h11 * hstep * m1
+                    w_s, f_s = imu_rates(ta + x * hstep, yn[0], yn[2], starts, durs, coefs, counts, vib, consts,
+                                         linvib, use_earth)
+                    acc_th += GL_WEIGHTS[g] * hstep * w_s
+                    acc_v += GL_WEIGHTS[g] * hstep * f_s
+                lat, lon, h = y1[0], y1[1], y1[2]
         dtheta[i] = acc_th
         dv[i] = acc_v
         pos[i, 0] = lat
         pos[i, 1] = lon
         pos[i, 2] = h
-        tp = t[i]
+        tp = ti
 
 
 @kernel

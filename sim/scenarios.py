@@ -95,42 +95,63 @@ _OPTIONAL = {
 }
 
 
-def _need(src: str, where: str, table: dict[str, Any], key: str) -> Any:
-    if key not in table:
-        raise ScenarioError(f"{src}: {where}: key '{key}' is missing")
-    return table[key]
+_START_KEYS = {"lat", "lon", "h", "yaw", "roll", "pitch", "speed"}
+_IMU_KEYS = {"rate", "duration", "grade", "earth"}
+_PERTURBATIONS = {
+    "coning": ({"half_angle", "freq"}, set()),
+    "angular_vibration": ({"axis", "amplitude", "freq"}, set()),
+    "linear_vibration": ({"accel", "freq"}, set()),
+    "random_vibration": ({"band"}, {"angular_psd", "linear_psd", "seed"}),
+    "sculling": ({"angle", "accel", "freq"}, set()),
+}
+_TURNTABLES = {
+    "continuous": ({"rate"}, set()),
+    "stop_and_go": ({"positions", "rate", "dwell"}, {"alternate"}),
+}
+_FAILURES = (KeyError, TypeError, ValueError, ZeroDivisionError, AttributeError, IndexError)
+
+
+def _keys(src: str, where: str, table: object, required: set[str], optional: set[str]) -> dict[str, Any]:
+    """Check a table's keys: all required present, nothing unknown."""
+    if not isinstance(table, dict):
+        raise ScenarioError(f"{src}: {where}: expected a table, got {type(table).__name__}")
+    unknown = set(table) - required - optional - {"kind"}
+    if unknown:
+        raise ScenarioError(f"{src}: {where}: unknown key(s) {', '.join(sorted(unknown))}")
+    missing = required - set(table)
+    if missing:
+        raise ScenarioError(f"{src}: {where}: key(s) {', '.join(sorted(missing))} missing")
+    return table
 
 
 def build(s: Scenario) -> Trajectory:
-    """Build the trajectory a scenario describes (raises ScenarioError on bad keys)."""
+    """Build the trajectory a scenario describes (raises ScenarioError on bad keys or values)."""
     src = s.source
-    start = s.doc.get("start")
-    if not isinstance(start, dict):
-        raise ScenarioError(f"{src}: table [start] with lat, lon, h is missing")
+    _keys(src, "[imu]", s.doc.get("imu", {}), set(), _IMU_KEYS)
+    unknown_top = set(s.doc) - {"description", "start", "imu", "segments", "perturbations", "turntable"}
+    if unknown_top:
+        raise ScenarioError(f"{src}: unknown top-level key(s) {', '.join(sorted(unknown_top))}")
+    if s.rate <= 0:
+        raise ScenarioError(f"{src}: [imu]: rate must be positive, got {s.rate}")
+    start = _keys(src, "[start]", s.doc.get("start"), {"lat", "lon", "h"}, _START_KEYS - {"lat", "lon", "h"})
     try:
         traj = Trajectory(
-            float(_need(src, "[start]", start, "lat")),
-            float(_need(src, "[start]", start, "lon")),
-            float(_need(src, "[start]", start, "h")),
-            yaw=float(start.get("yaw", 0.0)),
-            roll=float(start.get("roll", 0.0)),
-            pitch=float(start.get("pitch", 0.0)),
-            speed=float(start.get("speed", 0.0)),
+            float(start["lat"]), float(start["lon"]), float(start["h"]),
+            yaw=float(start.get("yaw", 0.0)), roll=float(start.get("roll", 0.0)),
+            pitch=float(start.get("pitch", 0.0)), speed=float(start.get("speed", 0.0)),
             use_earth=s.earth != "none",
         )
-    except (TypeError, ValueError) as exc:
+    except _FAILURES as exc:
         raise ScenarioError(f"{src}: [start]: {exc}") from None
-    for i, seg in enumerate(s.doc.get("segments", [])):
+    segments = s.doc.get("segments", [])
+    if not isinstance(segments, list):
+        raise ScenarioError(f"{src}: segments: expected an array of tables ([[segments]])")
+    for i, seg in enumerate(segments):
         where = f"segments[{i}]"
-        kind = seg.get("kind")
+        kind = seg.get("kind") if isinstance(seg, dict) else None
         if kind not in _SEGMENTS:
             raise ScenarioError(f"{src}: {where}: kind {kind!r} is not one of {', '.join(sorted(_SEGMENTS))}")
-        allowed = set(_SEGMENTS[kind]) | set(_OPTIONAL.get(kind, ())) | {"kind"}
-        extra = set(seg) - allowed
-        if extra:
-            raise ScenarioError(f"{src}: {where}: unknown key(s) {', '.join(sorted(extra))} for kind {kind!r}")
-        for key in _SEGMENTS[kind]:
-            _need(src, where, seg, key)
+        _keys(src, where, seg, set(_SEGMENTS[kind]), set(_OPTIONAL.get(kind, ())))
         args = {k: v for k, v in seg.items() if k != "kind"}
         try:
             if kind in ("accelerate", "decelerate"):
@@ -139,30 +160,46 @@ def build(s: Scenario) -> Trajectory:
                 traj.waypoints([tuple(map(float, p)) for p in args.pop("points")], **args)
             else:
                 getattr(traj, kind)(**args)
-        except (TypeError, ValueError) as exc:
+        except _FAILURES as exc:
             raise ScenarioError(f"{src}: {where}: {exc}") from None
-    for i, p in enumerate(s.doc.get("perturbations", [])):
+    perturbations = s.doc.get("perturbations", [])
+    if not isinstance(perturbations, list):
+        raise ScenarioError(f"{src}: perturbations: expected an array of tables ([[perturbations]])")
+    for i, p in enumerate(perturbations):
         where = f"perturbations[{i}]"
-        kind = p.get("kind")
-        args = {k: v for k, v in p.items() if k != "kind"}
+        kind = p.get("kind") if isinstance(p, dict) else None
+        if kind not in _PERTURBATIONS:
+            raise ScenarioError(f"{src}: {where}: kind {kind!r} is not one of {', '.join(sorted(_PERTURBATIONS))}")
+        _keys(src, where, p, *_PERTURBATIONS[kind])
         try:
             if kind == "coning":
-                traj.add_coning(float(args["half_angle"]), float(args["freq"]))
+                traj.add_coning(float(p["half_angle"]), float(p["freq"]))
             elif kind == "angular_vibration":
-                traj.add_angular_vibration(tuple(args["axis"]), float(args["amplitude"]), float(args["freq"]))
+                traj.add_angular_vibration(tuple(map(float, p["axis"])), float(p["amplitude"]), float(p["freq"]))
             elif kind == "linear_vibration":
-                traj.add_linear_vibration(tuple(args["accel"]), float(args["freq"]))
+                traj.add_linear_vibration(tuple(map(float, p["accel"])), float(p["freq"]))
             elif kind == "random_vibration":
-                traj.add_random_vibration(float(args.get("angular_psd", 0.0)), float(args.get("linear_psd", 0.0)),
-                                          tuple(args["band"]), int(args.get("seed", 0)))
-            elif kind == "sculling":
-                traj.add_sculling(float(args["angle"]), float(args["accel"]), float(args["freq"]))
+                band = tuple(map(float, p["band"]))
+                if len(band) != 2 or not 0 < band[0] < band[1]:
+                    raise ValueError(f"band must be [low, high] Hz with 0 < low < high, got {p['band']!r}")
+                traj.add_random_vibration(float(p.get("angular_psd", 0.0)), float(p.get("linear_psd", 0.0)),
+                                          band, int(p.get("seed", 0)))
             else:
-                raise ScenarioError(f"{src}: {where}: kind {kind!r} is not one of coning, angular_vibration, "
-                                    "linear_vibration, random_vibration, sculling")
-        except KeyError as exc:
-            raise ScenarioError(f"{src}: {where}: key {exc} is missing") from None
+                traj.add_sculling(float(p["angle"]), float(p["accel"]), float(p["freq"]))
+        except _FAILURES as exc:
+            raise ScenarioError(f"{src}: {where}: {exc}") from None
+    _check_turntable(s)
     return traj
+
+
+def _check_turntable(s: Scenario) -> None:
+    tt = s.doc.get("turntable")
+    if tt is None:
+        return
+    kind = tt.get("kind") if isinstance(tt, dict) else None
+    if kind not in _TURNTABLES:
+        raise ScenarioError(f"{s.source}: [turntable]: kind {kind!r} is not continuous or stop_and_go")
+    _keys(s.source, "[turntable]", tt, *_TURNTABLES[kind])
 
 
 def apply_turntable(s: Scenario, traj: Trajectory, until: float) -> None:
@@ -170,11 +207,12 @@ def apply_turntable(s: Scenario, traj: Trajectory, until: float) -> None:
     tt = s.doc.get("turntable")
     if not tt:
         return
-    kind = tt.get("kind")
-    if kind == "continuous":
-        traj.turntable_continuous(float(tt["rate"]), until)
-    elif kind == "stop_and_go":
-        traj.turntable_stop_and_go([float(x) for x in tt["positions"]], float(tt["rate"]), float(tt["dwell"]),
-                                   until, bool(tt.get("alternate", True)))
-    else:
-        raise ScenarioError(f"{s.source}: [turntable]: kind {kind!r} is not continuous or stop_and_go")
+    _check_turntable(s)
+    try:
+        if tt["kind"] == "continuous":
+            traj.turntable_continuous(float(tt["rate"]), until)
+        else:
+            traj.turntable_stop_and_go([float(x) for x in tt["positions"]], float(tt["rate"]), float(tt["dwell"]),
+                                       until, bool(tt.get("alternate", True)))
+    except _FAILURES as exc:
+        raise ScenarioError(f"{s.source}: [turntable]: {exc}") from None

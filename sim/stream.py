@@ -73,7 +73,10 @@ def frames(run: SimRun, mav: mavlink.MAVLink, opts: StreamOptions) -> Iterator[t
     """Yield (sensor time s, messages) for each IMU sample, in order."""
     rng = np.random.default_rng(opts.seed + 1)
     if opts.imu_rates == "averaged" or opts.msg == "raw":
-        w, f = run.rates()
+        # each message averages over its own (true) sample interval, like PX4's
+        # integral over the last period: after a dropped sample it does not cover the gap
+        dt_true = np.diff(np.concatenate(([run.exact.t0], run.exact.t)))[run.kept][:, None]
+        w, f = run.dtheta / dt_true, run.dv / dt_true
     else:
         # instantaneous truth plus the same sensor errors the increments carry
         w_true, f_true = instant_rates(run.exact)

@@ -55,6 +55,7 @@ class Channel:
             raise ValueError("a value ramp needs the channel at rest (rate 0)")
         d = target - self.value
         self._add(dur, np.array([self.value, 0, 0, 10 * d, -15 * d, 6 * d, 0], dtype=float))
+        self.rate = 0.0  # the smoothstep ends at rest exactly (its slope polynomial vanishes at u = 1)
 
     def ramp_rate(self, target_rate: float, dur: float) -> None:
         """Smoothstep of the rate from its current value to ``target_rate``."""
@@ -96,6 +97,7 @@ class MotionSpec:
     linvib: np.ndarray
     use_earth: bool
     max_freq: float
+    breaks: np.ndarray = field(default_factory=lambda: np.empty(0))
 
 
 class Trajectory:
@@ -149,6 +151,7 @@ class Trajectory:
     # -- segments ----------------------------------------------------------
     def static(self, duration: float) -> "Trajectory":
         """Hold speed, heading and attitude (a hover when the speed is zero)."""
+        _positive("duration", duration, allow_zero=True)
         self._finish(duration)
         return self
 
@@ -161,6 +164,7 @@ class Trajectory:
         ``tilt`` pitches the vehicle like a multicopter, nose down by the
         acceleration's angle ``atan(a/g)`` and back.
         """
+        _positive("accel", accel)
         dv = to_speed - self.speed
         if dv == 0:
             return self
@@ -181,11 +185,14 @@ class Trajectory:
 
         Coordinated turns bank to ``atan(V r / g)`` while turning (level turn).
         """
+        _positive("rate", rate)
+        _positive("ramp", ramp)
         r = math.radians(math.copysign(abs(rate), angle))
         a = math.radians(angle)
         if a == 0:
             return self
-        ramp = min(ramp, abs(a / r))
+        if abs(a / r) < ramp:
+            r = a / ramp  # a small turn keeps its ramps and turns slower instead
         hold = abs(a / r) - ramp
         yaw = self.ch[kin.CH_YAW]
         yaw.ramp_rate(r, ramp)
@@ -202,13 +209,17 @@ class Trajectory:
 
     def climb(self, height: float, rate: float = 2.0, accel: float = 1.0) -> "Trajectory":
         """Climb (or descend, negative) by ``height`` m at vertical speed ``rate`` m/s."""
+        _positive("rate", rate)
+        _positive("accel", accel)
         if height == 0:
             return self
         vz = math.copysign(abs(rate), height)
         ramp = SMOOTHSTEP_PEAK * abs(vz) / accel
         hold = abs(height / vz) - ramp
         if hold < 0:
-            ramp = abs(height / vz)
+            # too short to reach the speed: the fastest climb the acceleration allows
+            vz = math.copysign(math.sqrt(abs(height) * accel / SMOOTHSTEP_PEAK), height)
+            ramp = SMOOTHSTEP_PEAK * abs(vz) / accel
             hold = 0.0
         vd = self.ch[kin.CH_VD]
         vd.ramp_value(-vz, ramp)
@@ -219,6 +230,7 @@ class Trajectory:
 
     def attitude(self, duration: float, roll: float | None = None, pitch: float | None = None) -> "Trajectory":
         """Move roll and/or pitch (deg) to new values over ``duration`` s."""
+        _positive("duration", duration)
         if roll is not None:
             self.ch[kin.CH_ROLL].ramp_value(math.radians(roll), duration)
         if pitch is not None:
@@ -232,16 +244,21 @@ class Trajectory:
     ) -> "Trajectory":
         """Fly through local waypoints ``(north m, east m, up m)`` from the start point.
 
-        Turns at most ``turn_rate`` deg/s, accelerations at most ``accel``,
-        climbs at most ``climb_rate`` m/s; each leg turns to the bearing, then
-        flies straight, changing height on the way.
+        Turns at most ``turn_rate`` deg/s, along-track accelerations at most
+        ``accel`` (the centripetal acceleration of a turn is ``V * turn_rate``),
+        climbs at most ``climb_rate`` m/s; each leg turns until on course to the
+        point, then flies straight, changing height on the way.
         """
         for n, e, u in points:
-            bearing = math.degrees(math.atan2(e - self.east, n - self.north))
-            turn = (bearing - self.yaw_deg + 180.0) % 360.0 - 180.0
             if self.speed < speed:
                 self.accelerate(speed, accel)
-            self.turn(turn, turn_rate, coordinated)
+            # a turn moves the vehicle: turn again towards the point until on course
+            for _ in range(8):
+                bearing = math.degrees(math.atan2(e - self.east, n - self.north))
+                turn = (bearing - self.yaw_deg + 180.0) % 360.0 - 180.0
+                if abs(turn) < 1e-3:
+                    break
+                self.turn(turn, turn_rate, coordinated)
             dist = math.hypot(n - self.north, e - self.east)
             dh = u - self.up
             if abs(dh) > 0.5:
@@ -320,26 +337,32 @@ class Trajectory:
         With ``alternate`` the sequence runs forward then back (0, 90, 180, 270,
         180, 90, 0, ...), so rotations of opposite direction follow each other.
         """
+        _positive("rate", rate)
+        _positive("dwell", dwell)
         ch = self.ch[kin.CH_TT1]
-        seq = list(positions)
-        order = seq + (seq[-2:0:-1] if alternate else [seq[0] + 360.0])
+        m = len(positions)
+        if alternate and m > 1:
+            order = list(positions) + list(positions[-2:0:-1])
+            target = lambda k: order[k % len(order)]  # noqa: E731
+        else:
+            target = lambda k: positions[k % m] + 360.0 * (k // m)  # noqa: E731
+        ch.value = math.radians(target(0))
         k = 0
-        ch.value = math.radians(order[0])
         while ch.t_end < until:
             ch.hold_until(min(ch.t_end + dwell, until))
             if ch.t_end >= until:
                 break
-            nxt = order[(k + 1) % len(order)]
-            cur = order[k % len(order)]
-            if not alternate and k % len(order) == len(order) - 1:
-                nxt, cur = order[0] + 360.0 * (k // len(order) + 1), cur
-            delta = math.radians(nxt - cur)
-            r = math.copysign(math.radians(rate), delta)
-            hold = abs(delta / r) - ramp
-            ch.ramp_rate(r, ramp)
-            ch.hold_until(ch.t_end + max(hold, 0.0))
-            ch.ramp_rate(0.0, ramp)
             k += 1
+            delta = math.radians(target(k)) - ch.value
+            if delta == 0.0:
+                continue
+            r = math.copysign(math.radians(rate), delta)
+            tau = min(ramp, abs(delta / r))
+            hold = abs(delta / r) - tau
+            ch.ramp_rate(r, tau)
+            ch.hold_until(ch.t_end + hold)
+            ch.ramp_rate(0.0, tau)
+            ch.value = math.radians(target(k))  # exact stop despite round-off
         return self
 
     # -- output --------------------------------------------------------------
@@ -368,6 +391,7 @@ class Trajectory:
             consts=np.array([self.cone[0], self.cone[1], g]),
             linvib=np.array(self.linvib, dtype=float).reshape(-1, 6),
             use_earth=self.use_earth, max_freq=self.max_freq,
+            breaks=np.unique(np.concatenate([s for s, _, _ in arrs] + [s + d for s, d, _ in arrs])),
         )
 
 
@@ -422,7 +446,7 @@ def simulate(traj: Trajectory | MotionSpec, rate: float, duration: float | None 
             b = min(a + chunk, n)
             kin.integrate(t_prev, t[a:b], substeps, p_prev[0], p_prev[1], p_prev[2], spec.starts, spec.durs,
                           spec.coefs, spec.counts, spec.vib, spec.consts, spec.linvib, spec.use_earth,
-                          dtheta[a:b], dv[a:b], pos[a:b])
+                          spec.breaks, dtheta[a:b], dv[a:b], pos[a:b])
             t_prev, p_prev = t[b - 1], (pos[b - 1, 0], pos[b - 1, 1], pos[b - 1, 2])
             bar.update(b)
     tt = np.concatenate(([spec.t0], t))
@@ -463,3 +487,9 @@ def instant_rates(res: SimResult) -> tuple[np.ndarray, np.ndarray]:
         w[i], f[i] = kin.imu_rates(float(ti), float(lat[i]), float(h[i]), sp.starts, sp.durs, sp.coefs, sp.counts,
                                    sp.vib, sp.consts, sp.linvib, sp.use_earth)
     return w, f
+
+
+def _positive(name: str, value: float, allow_zero: bool = False) -> None:
+    """Reject a non-positive (or negative, with allow_zero) segment value."""
+    if not (value >= 0 if allow_zero else value > 0):
+        raise ValueError(f"{name} must be {'>= 0' if allow_zero else '> 0'}, got {value}")

@@ -1,0 +1,364 @@
+"""The simulator's MAVLink stream (sim.stream), decoded by plain pymavlink.
+
+* End to end over UDP on localhost: ``sim.stream.stream`` (udpout) paced at
+  20x real time into ``mavutil.mavlink_connection("udpin:...")``; every
+  message is checked against the run it came from: ids, units, scaling,
+  timestamps (sensor time), rates and order.
+* Values through ``sim.stream.frames`` packed to bytes and parsed back by a
+  separate pymavlink parser: RAW_IMU scaling, rounding and clipping, and
+  instantaneous ('sampled') against interval-averaged HIGHRES_IMU against
+  closed forms.
+
+Units (MAVLink common dialect): HIGHRES_IMU m/s^2 and rad/s (float32), RAW_IMU
+mG and mrad/s (int16, ArduPilot's scaling, G0 = 9.80665), SIM_STATE
+quaternion w,x,y,z, lat/lon float degrees and lat_int/lon_int degE7.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import socket
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink import mavutil  # noqa: E402
+from pymavlink.dialects.v20 import common as mavlink2  # noqa: E402
+
+from mavins.cli import main as cli_main  # noqa: E402
+from sim import errors  # noqa: E402
+from sim.generate import SimRun, generate  # noqa: E402
+from sim.scenarios import load  # noqa: E402
+from sim.stream import StreamOptions, frames, stream  # noqa: E402
+from sim.trajectory import instant_rates  # noqa: E402
+
+G0 = 9.80665
+A_WGS, F_WGS = 6378137.0, 1.0 / 298.257223563
+E2 = F_WGS * (2.0 - F_WGS)
+
+MOVING = """
+description = "turning, climbing, vibrating: every stream field changes"
+[start]
+lat = 47.397742
+lon = 8.545594
+h = 488.0
+yaw = 20.0
+speed = 12.0
+[imu]
+rate = 100.0
+[[segments]]
+kind = "turn"
+angle = 60.0
+rate = 30.0
+ramp = 0.5
+[[segments]]
+kind = "climb"
+height = 3.0
+rate = 2.0
+accel = 2.0
+[[perturbations]]
+kind = "angular_vibration"
+axis = [1.0, 0.0, 0.0]
+amplitude = 0.3
+freq = 4.0
+"""
+
+VIBRATION_LAB = """
+description = "laboratory mode: level, static, pitch vibration"
+[start]
+lat = 45.0
+lon = 7.0
+h = 100.0
+[imu]
+rate = 100.0
+earth = "none"
+[[segments]]
+kind = "static"
+duration = 1.0
+[[perturbations]]
+kind = "angular_vibration"
+axis = [0.0, 1.0, 0.0]
+amplitude = 1.0
+freq = 5.0
+"""
+
+
+def f32(x) -> np.ndarray:
+    return np.asarray(x, dtype=np.float32)
+
+
+@pytest.fixture(scope="module")
+def scenario_dir(tmp_path_factory) -> Path:
+    d = tmp_path_factory.mktemp("scenarios")
+    (d / "moving.toml").write_text(MOVING)
+    (d / "vibration_lab.toml").write_text(VIBRATION_LAB)
+    return d
+
+
+@pytest.fixture(scope="module")
+def moving(scenario_dir) -> SimRun:
+    return generate(load(str(scenario_dir / "moving.toml")), duration=3.0)
+
+
+def _free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _receive(send, port: int, timeout: float = 60.0) -> list:
+    """Run send() in a thread while a plain pymavlink udpin connection collects every message."""
+    rx = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", dialect="common")
+    rx.port.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)
+    result: dict = {}
+    th = threading.Thread(target=lambda: result.setdefault("out", send()), daemon=True)
+    th.start()
+    msgs = []
+    deadline = time.monotonic() + timeout
+    try:
+        while time.monotonic() < deadline:
+            m = rx.recv_match(blocking=True, timeout=0.3)
+            if m is None:
+                if not th.is_alive():
+                    break
+                continue
+            assert m.get_type() != "BAD_DATA", m
+            msgs.append(m)
+    finally:
+        th.join(timeout=10)
+        rx.close()
+    return msgs, result.get("out")
+
+
+def _sensor_times(msgs: list, kind: str) -> np.ndarray:
+    """time_usec of the IMU message sent at the same instant as each message of `kind`.
+
+    frames() sends, per instant: HEARTBEAT, the IMU message, SIM_STATE, ATTITUDE,
+    GPS_RAW_INT, SCALED_PRESSURE (those due). HEARTBEAT comes before its IMU message.
+    """
+    out = []
+    for i, m in enumerate(msgs):
+        if m.get_type() != kind:
+            continue
+        step = 1 if kind == "HEARTBEAT" else -1
+        j = i + step
+        while msgs[j].get_type() not in ("HIGHRES_IMU", "RAW_IMU"):
+            j += step
+        out.append(msgs[j].time_usec)
+    return np.array(out, dtype=np.int64)
+
+
+def _every_usec(t_usec: np.ndarray, rate: float) -> np.ndarray:
+    """First sample, then the first sample at or after each multiple of 1/rate (integer arithmetic)."""
+    period = int(round(1e6 / rate))
+    k = t_usec // period
+    return t_usec[np.concatenate(([True], k[1:] != k[:-1]))]
+
+
+def test_udp_stream_end_to_end(moving: SimRun) -> None:
+    port = _free_udp_port()
+    opts = StreamOptions(speed=20.0, sysid=42)
+    t_wall = time.monotonic()
+    msgs, stats = _receive(lambda: stream(moving, f"udpout:127.0.0.1:{port}", opts), port)
+    wall = time.monotonic() - t_wall
+    n = len(moving.t)
+    t_usec = np.round(moving.t * 1e6).astype(np.int64)
+    by = lambda kind: [m for m in msgs if m.get_type() == kind]  # noqa: E731
+
+    # nothing lost, in order, MAVLink 2, identity
+    assert stats.messages == len(msgs) and stats.imu_messages == n
+    seq = np.array([m.get_seq() for m in msgs])
+    assert np.all(np.diff(seq) % 256 == 1)
+    assert all(m.get_srcSystem() == 42 and m.get_srcComponent() == mavlink2.MAV_COMP_ID_AUTOPILOT1 for m in msgs)
+    assert all(m.get_msgbuf()[0] == mavlink2.PROTOCOL_MARKER_V2 for m in msgs)
+    assert wall >= moving.t[-1] / 20.0 * 0.9  # paced on sensor time at 20x
+
+    # HIGHRES_IMU: one per sample, time_usec = round(t * 1e6), averaged rates as float32, SI units
+    imu = by("HIGHRES_IMU")
+    assert len(imu) == n
+    assert np.array_equal([m.time_usec for m in imu], t_usec)
+    w, f = moving.rates()
+    got = np.array([[m.xacc, m.yacc, m.zacc, m.xgyro, m.ygyro, m.zgyro] for m in imu])
+    assert np.array_equal(got.astype(np.float32), f32(np.column_stack([f, w])))
+    assert all(m.fields_updated == 0b111111 and m.id == 0 for m in imu)
+    # specific force in FRD: -g on z level, -g/cos(32 deg) = -11.6 in the banked turn, -(g + 2) climbing
+    assert np.all((got[:, 2] < -9.7) & (got[:, 2] > -12.0))
+
+    # HEARTBEAT at 1 Hz of sensor time
+    hb = by("HEARTBEAT")
+    assert np.array_equal(_sensor_times(msgs, "HEARTBEAT"), _every_usec(t_usec, 1.0))
+    assert len(hb) == 4  # t = 0.01, 1, 2, 3 s
+    assert all(m.type == mavlink2.MAV_TYPE_QUADROTOR and m.autopilot == mavlink2.MAV_AUTOPILOT_GENERIC for m in hb)
+
+    # SIM_STATE straight after the IMU message of the same instant, at 50 Hz, carrying that instant's truth
+    idx = [i for i, m in enumerate(msgs) if m.get_type() == "SIM_STATE"]
+    assert all(msgs[i - 1].get_type() == "HIGHRES_IMU" for i in idx)
+    assert np.array_equal(_sensor_times(msgs, "SIM_STATE"), _every_usec(t_usec, 50.0))
+    assert stats.truth_messages == len(idx) == 151
+    truth = moving.exact.truth
+    for i in idx:
+        s, m_imu = msgs[i], msgs[i - 1]
+        k = int(np.searchsorted(t_usec, m_imu.time_usec)) + 1  # truth row (row 0 = initial state)
+        row = truth[k]
+        assert np.array_equal(f32([s.q1, s.q2, s.q3, s.q4]), f32(row[10:14]))
+        assert np.array_equal(f32([s.roll, s.pitch, s.yaw]), f32(np.radians(row[7:10])))
+        assert np.array_equal(f32([s.lat, s.lon, s.alt]), f32(row[1:4]))  # degrees, degrees, m
+        assert (s.lat_int, s.lon_int) == (round(row[1] * 1e7), round(row[2] * 1e7))
+        assert np.array_equal(f32([s.vn, s.ve, s.vd]), f32(row[4:7]))
+        assert np.array_equal(f32([s.xacc, s.yacc, s.zacc, s.xgyro, s.ygyro, s.zgyro]),
+                              f32([m_imu.xacc, m_imu.yacc, m_imu.zacc, m_imu.xgyro, m_imu.ygyro, m_imu.zgyro]))
+    # quaternion order w, x, y, z: q1 is the scalar part
+    s0 = msgs[idx[0]]
+    assert abs(s0.q1) > 0.9 and np.isclose(np.hypot(s0.q1, s0.q4), 1.0, atol=0.01)  # level, yawed 20 deg
+
+    # ATTITUDE at 10 Hz: the vehicle's attitude, time_boot_ms = time_usec // 1000
+    att = by("ATTITUDE")
+    times = _sensor_times(msgs, "ATTITUDE")
+    assert np.array_equal(times, _every_usec(t_usec, 10.0)) and len(att) == 31
+    for m, tu in zip(att, times):
+        row = truth[int(np.searchsorted(t_usec, tu)) + 1]
+        assert m.time_boot_ms == tu // 1000
+        assert np.array_equal(f32([m.roll, m.pitch, m.yaw]), f32(np.radians(row[14:17])))
+
+    # GPS_RAW_INT at 5 Hz, 3D fix, degE7 / mm / cm/s / cdeg, noise 0.5 m horizontal and 1 m vertical (1 sigma)
+    gps = by("GPS_RAW_INT")
+    times = _sensor_times(msgs, "GPS_RAW_INT")
+    assert np.array_equal(times, _every_usec(t_usec, 5.0)) and len(gps) == 16
+    for m, tu in zip(gps, times):
+        row = truth[int(np.searchsorted(t_usec, tu)) + 1]
+        assert m.time_usec == tu and m.fix_type == 3 and m.satellites_visible == 12
+        lat = math.radians(row[1])
+        rn = A_WGS * (1 - E2) / (1 - E2 * math.sin(lat) ** 2) ** 1.5
+        re = A_WGS / math.sqrt(1 - E2 * math.sin(lat) ** 2)
+        assert abs(math.radians(m.lat * 1e-7 - row[1]) * rn) < 5 * 0.5 + 0.02
+        assert abs(math.radians(m.lon * 1e-7 - row[2]) * re * math.cos(lat)) < 5 * 0.5 + 0.02
+        assert abs(m.alt / 1000 - row[3]) < 5 * 1.0 and m.alt_ellipsoid == m.alt
+        assert m.vel == round(math.hypot(row[4], row[5]) * 100)
+        assert m.cog == round(((math.degrees(math.atan2(row[5], row[4])) + 360) % 360) * 100) % 36000
+        assert (m.eph, m.epv) == (80, 120)
+
+    # SCALED_PRESSURE at 10 Hz: standard atmosphere at the truth height, hPa, 0.012 hPa noise
+    baro = by("SCALED_PRESSURE")
+    times = _sensor_times(msgs, "SCALED_PRESSURE")
+    assert np.array_equal(times, _every_usec(t_usec, 10.0)) and len(baro) == 31
+    for m, tu in zip(baro, times):
+        row = truth[int(np.searchsorted(t_usec, tu)) + 1]
+        assert m.time_boot_ms == tu // 1000 and m.temperature == 2000
+        assert abs(m.press_abs - 1013.25 * (1 - 2.25577e-5 * row[3]) ** 5.25588) < 5 * 0.012
+
+
+def _decode(mav_msgs: list) -> list:
+    """Pack with one MAVLink 2 instance and parse back with a separate, plain pymavlink parser."""
+    tx = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
+    rx = mavlink2.MAVLink(None)
+    out = []
+    for m in mav_msgs:
+        out.extend(rx.parse_buffer(m.pack(tx)) or [])
+    return out
+
+
+def test_raw_imu_scaling_rounding_clipping(moving: SimRun) -> None:
+    """RAW_IMU: int16 mG (G0 = 9.80665) and mrad/s, rounded to nearest, clipped at the int16 range."""
+    # first row set to values straddling the rounding points, and beyond the int16 range
+    dt0 = moving.t[0] - moving.exact.t0
+    f_mg = np.array([0.49, -0.51, 40000.0])
+    w_mrad = np.array([1.5001, -2.4999, -50000.0])
+    dv = moving.dv.copy()
+    dth = moving.dtheta.copy()
+    dv[0] = f_mg * G0 / 1000 * dt0
+    dth[0] = w_mrad / 1000 * dt0
+    run = dataclasses.replace(moving, dv=dv, dtheta=dth)
+    mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
+    sent = [m for _, ms in frames(run, mav, StreamOptions(msg="raw", speed=None)) for m in ms]
+    raw = [m for m in _decode(sent) if m.get_type() == "RAW_IMU"]
+    assert len(raw) == len(run.t)
+    assert (raw[0].xacc, raw[0].yacc, raw[0].zacc) == (0, -1, 32767)
+    assert (raw[0].xgyro, raw[0].ygyro, raw[0].zgyro) == (2, -2, -32768)
+    w, f = run.rates()
+    acc = np.array([[m.xacc, m.yacc, m.zacc] for m in raw[1:]])
+    gyr = np.array([[m.xgyro, m.ygyro, m.zgyro] for m in raw[1:]])
+    assert np.all(np.abs(acc - f[1:] / (G0 / 1000)) <= 0.5 + 1e-9)
+    assert np.all(np.abs(gyr - w[1:] * 1000) <= 0.5 + 1e-9)
+    assert np.all((acc[:, 2] <= -990) & (acc[:, 2] > -12.0 / G0 * 1000))  # -1 g .. -1.22 g, as above
+    assert np.array_equal([m.time_usec for m in raw], np.round(run.t * 1e6).astype(np.int64))
+    assert all(m.id == 0 and (m.xmag, m.ymag, m.zmag) == (0, 0, 0) for m in raw)
+    assert not any(m.get_type() == "HIGHRES_IMU" for m in _decode(sent))
+
+
+def test_sampled_and_averaged_highres_imu(scenario_dir) -> None:
+    """'sampled' HIGHRES_IMU = the instantaneous rates at the sample time; 'averaged' = increment / dt.
+
+    Pitch vibration phi = A sin(Wt) in laboratory mode: sampled ygyro = A W cos(Wt),
+    averaged ygyro = A [sin(Wt)] / dt; f = [g sin(phi), 0, -g cos(phi)] at the instant.
+    They differ by about A W (W dt / 2) = 0.086 rad/s here.
+    """
+    run = generate(load(str(scenario_dir / "vibration_lab.toml")))
+    amp, w = math.radians(1.0), 2 * math.pi * 5.0
+    lat = math.radians(45.0)
+    s2 = math.sin(lat) ** 2
+    g = 9.7803253359 * (1 + 0.00193185265241 * s2) / math.sqrt(1 - E2 * s2)
+    g *= 1 - 2 / A_WGS * (1 + F_WGS + 0.00344978650684 - 2 * F_WGS * s2) * 100.0 + 3 * 100.0**2 / A_WGS**2
+    t = run.t
+    tp = np.concatenate(([run.exact.t0], t))
+    mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
+    decoded = {}
+    for mode in ("sampled", "averaged"):
+        sent = [m for _, ms in frames(run, mav, StreamOptions(imu_rates=mode, speed=None)) for m in ms]
+        imu = [m for m in _decode(sent) if m.get_type() == "HIGHRES_IMU"]
+        decoded[mode] = np.array([[m.xacc, m.yacc, m.zacc, m.xgyro, m.ygyro, m.zgyro] for m in imu])
+    samp, avg = decoded["sampled"], decoded["averaged"]
+    phi = amp * np.sin(w * t)
+    assert np.allclose(samp[:, 4], amp * w * np.cos(w * t), rtol=0, atol=2e-8)  # float32 of ~0.55 rad/s
+    assert np.allclose(samp[:, [0, 2]], np.column_stack([g * np.sin(phi), -g * np.cos(phi)]), rtol=0, atol=1e-6)
+    w_inst, f_inst = instant_rates(run.exact)
+    assert np.array_equal(samp.astype(np.float32), f32(np.column_stack([f_inst, w_inst])))
+    assert np.allclose(avg[:, 4], amp * np.diff(np.sin(w * tp)) / np.diff(tp), rtol=0, atol=2e-8)
+    assert np.max(np.abs(samp[:, 4] - avg[:, 4])) == pytest.approx(amp * w * (w * 0.01 / 2), rel=0.02)
+
+
+def test_sampled_rates_carry_the_sensor_errors(moving: SimRun, scenario_dir) -> None:
+    """Noisy grade: timestamps carry the jitter (time_usec = round(t * 1e6) of the reported times);
+    sampled rates = instantaneous truth + the increments' error / the true interval."""
+    run = generate(load(str(scenario_dir / "moving.toml")), duration=1.0, grade="tactical", seed=5)
+    assert run.kept.all() and not np.array_equal(run.t, run.exact.t)
+    mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
+    sent = [m for _, ms in frames(run, mav, StreamOptions(imu_rates="sampled", speed=None)) for m in ms]
+    imu = [m for m in _decode(sent) if m.get_type() == "HIGHRES_IMU"]
+    assert np.array_equal([m.time_usec for m in imu], np.round(run.t * 1e6).astype(np.int64))
+    w_inst, f_inst = instant_rates(run.exact)
+    dt = np.diff(np.concatenate(([run.exact.t0], run.exact.t)))[:, None]
+    expect = np.column_stack([f_inst + (run.dv - run.exact.dv) / dt, w_inst + (run.dtheta - run.exact.dtheta) / dt])
+    got = np.array([[m.xacc, m.yacc, m.zacc, m.xgyro, m.ygyro, m.zgyro] for m in imu])
+    assert np.array_equal(got.astype(np.float32), f32(expect))
+
+
+def test_averaged_rate_after_a_drop(moving: SimRun) -> None:
+    model = errors.ImuErrorModel(drop_probability=0.2)
+    t, dth, dv, kept = errors.apply(model, moving.exact.t, moving.exact.dtheta, moving.exact.dv, 1,
+                                    t_start=moving.exact.t0)
+    assert not kept.all()
+    run = dataclasses.replace(moving, t=t, dtheta=dth, dv=dv, kept=kept)
+    mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
+    imu = [m for _, ms in frames(run, mav, StreamOptions(speed=None)) for m in ms if m.get_type() == "HIGHRES_IMU"]
+    zacc = np.array([m.zacc for m in imu])
+    dt = np.diff(np.concatenate(([moving.exact.t0], moving.exact.t)))[kept]
+    assert np.allclose(zacc, f32(moving.exact.dv[kept, 2] / dt), rtol=1e-6)
+
+
+def test_cli_stream_raw(tmp_path) -> None:
+    """`mavins sim static --stream udpout:... --msg raw --speed max --sysid 7`: every sample arrives as RAW_IMU."""
+    port = _free_udp_port()
+    argv = ["sim", "static", "--stream", f"udpout:127.0.0.1:{port}", "--duration", "1", "--rate", "100",
+            "--msg", "raw", "--speed", "max", "--sysid", "7"]
+    msgs, rc = _receive(lambda: cli_main(argv), port)
+    assert rc == 0
+    raw = [m for m in msgs if m.get_type() == "RAW_IMU"]
+    assert len(raw) == 100 and all(m.get_srcSystem() == 7 for m in msgs)
+    assert [m.time_usec for m in raw] == [10000 * (k + 1) for k in range(100)]
+    assert not any(m.get_type() == "HIGHRES_IMU" for m in msgs)
