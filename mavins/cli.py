@@ -354,7 +354,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
     if args.rerun or args.rerun_serve:
         from .record import Recorder
 
-        svc.attach_recorder(Recorder(args.rerun, serve=args.rerun_serve, app="mavins"))
+        rec = Recorder(args.rerun, serve=args.rerun_serve, app="mavins")
+        svc.attach_recorder(rec)
+        if rec.url:
+            print(f"mavins run: live recording at {rec.url} (open it with: rerun {rec.url})", file=sys.stderr)
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
@@ -480,6 +483,14 @@ def _cmd_key(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_review(sub: argparse._SubParsersAction) -> None:
+    from .review import DESCRIPTION, add_arguments, run
+
+    p = sub.add_parser("review", help="render a Rerun recording to PNG, headless", description=DESCRIPTION)
+    add_arguments(p)
+    p.set_defaults(func=lambda a: run(a, "mavins review"))
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The full ``mavins`` parser with every subcommand."""
     parser = argparse.ArgumentParser(
@@ -504,7 +515,7 @@ def _version() -> str:
         return "unknown"
 
 
-_EXTRA_COMMANDS: list[Callable[[argparse._SubParsersAction], None]] = [_add_sim, _add_run, _add_replay, _add_demo, _add_key]
+_EXTRA_COMMANDS: list[Callable[[argparse._SubParsersAction], None]] = [_add_sim, _add_run, _add_replay, _add_demo, _add_review, _add_key]
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -144,6 +144,8 @@ def run_demo(
         from .record import Recorder
 
         recorder = Recorder(rerun_path, serve=rerun_serve, app="mavins-demo")
+        if recorder.url:
+            print(f"mavins demo: live recording at {recorder.url} (open it with: rerun {recorder.url})", flush=True)
     svc = Service(engine_cfg, IngestConfig(), ServiceConfig(master=f"udpin:127.0.0.1:{p_in}",
                                                            outs=[f"udpout:127.0.0.1:{p_out}"]))
     if recorder is not None:

@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 FLUSH_ROWS = 512
+TRUTH_MATCH_S = 1e-3  # truth is compared at the nearest truth sample within this much sensor time
 TRAJ_POINTS = 2000
 TRAJ_EVERY_S = 2.0
 
@@ -44,6 +45,13 @@ COLORS = {
 XYZ = [COLORS["x"], COLORS["y"], COLORS["z"]]
 
 
+def _line_radius():  # type: ignore[no-untyped-def]
+    """Trajectory line width in screen points, readable at any zoom."""
+    import rerun as rr
+
+    return rr.components.Radius.ui_points(1.5)
+
+
 def _free_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind(("127.0.0.1", 0))
@@ -51,30 +59,48 @@ def _free_port() -> int:
 
 
 def blueprint():  # type: ignore[no-untyped-def]
-    """The default layout: 3D and attitude first, errors, IMU, health and log."""
+    """The default layout: 3D and log left, navigation and errors middle, IMU and health right.
+
+    Plots span the whole run and the time cursor follows new data, so the first
+    screen of a file or of a live run shows the story.
+    """
     import rerun.blueprint as rrb
+
+    whole = rrb.TimeAxis(view_range=rrb.TimeRange(start=rrb.TimeRangeBoundary.infinite(),
+                                                  end=rrb.TimeRangeBoundary.infinite()))
+
+    def series(origin: str, name: str, **kw: object):  # type: ignore[no-untyped-def]
+        return rrb.TimeSeriesView(origin=origin, name=name, axis_x=whole,
+                                  plot_legend=rrb.PlotLegend(corner="RightTop"), **kw)
 
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(
                 rrb.Spatial3DView(origin="/world", name="3D (NED)"),
                 rrb.TextLogView(origin="/log", name="Log"),
-                row_shares=[4, 1],
+                row_shares=[3, 1],
             ),
             rrb.Vertical(
-                rrb.TimeSeriesView(origin="/plots/attitude", name="Attitude (deg)"),
-                rrb.TimeSeriesView(origin="/errors", name="Errors vs truth"),
-                rrb.TimeSeriesView(origin="/plots/velocity", name="Velocity NED (m/s)"),
-                rrb.TimeSeriesView(origin="/plots/position", name="Position from origin (m)"),
+                series("/plots/attitude", "Attitude (deg)"),
+                series("/plots/velocity", "Velocity NED (m/s)"),
+                series("/plots/position", "Position from origin (m)"),
+                rrb.Horizontal(
+                    series("/errors/attitude", "Attitude error (deg)"),
+                    series("/errors", "Position (m) / velocity (m/s) error",
+                           contents=["+ /errors/position", "+ /errors/velocity"]),
+                ),
             ),
             rrb.Vertical(
-                rrb.TimeSeriesView(origin="/imu/gyro", name="Gyro (rad/s)"),
-                rrb.TimeSeriesView(origin="/imu/accel", name="Accel (m/s^2)"),
-                rrb.TimeSeriesView(origin="/health", name="Health"),
+                series("/imu/gyro", "Gyro (rad/s)"),
+                series("/imu/accel", "Accel (m/s^2)"),
+                series("/health/sample_interval", "Sample interval (ms)"),
+                series("/health/output_rate", "Output rate (Hz)"),
             ),
-            column_shares=[3, 3, 2],
+            column_shares=[4, 3, 2],
         ),
-        rrb.TimePanel(timeline="sensor_time", expanded=False),
+        rrb.TimePanel(timeline="sensor_time", state="collapsed", play_state="following"),
+        rrb.BlueprintPanel(state="collapsed"),
+        rrb.SelectionPanel(state="collapsed"),
     )
 
 
@@ -129,9 +155,6 @@ class Recorder:
             "/plots/height": (["height"], [COLORS["estimated"]]),
             "/imu/gyro": (["gyro x", "gyro y", "gyro z"], XYZ),
             "/imu/accel": (["accel x", "accel y", "accel z"], XYZ),
-            "/errors/attitude": (["attitude error (deg)"], [COLORS["x"]]),
-            "/errors/position": (["horizontal position error (m)"], [COLORS["y"]]),
-            "/errors/velocity": (["velocity error (m/s)"], [COLORS["z"]]),
             "/health/sample_interval": (["sample interval (ms)"], [[150, 150, 150]]),
             "/health/output_rate": (["output rate (Hz)"], [[100, 200, 200]]),
         }
@@ -142,6 +165,11 @@ class Recorder:
         """Truth rows (sim file units: t, lat, lon, h, vn, ve, vd, roll, pitch, yaw, q...) for errors and the 3D view."""
         self._truth = np.asarray(truth)
         self._truth_t = self._truth[:, 0]
+        rr = self.rr
+        for path, name, color in (("/errors/attitude", "attitude error (deg)", COLORS["x"]),
+                                  ("/errors/position", "horizontal position error (m)", COLORS["y"]),
+                                  ("/errors/velocity", "velocity error (m/s)", COLORS["z"])):
+            self.rec.log(path, rr.SeriesLines(names=[name], colors=[color]), static=True)
 
     # -- per-sample and per-output ----------------------------------------------
     def _push(self, path: str, t: float, values: list[float]) -> None:
@@ -180,8 +208,13 @@ class Recorder:
     def _errors(self, t: float, row: np.ndarray) -> None:
         if self._truth_t is None:
             return
-        i = int(np.searchsorted(self._truth_t, t - 1e-7))
-        if i >= len(self._truth_t) or abs(self._truth_t[i] - t) > 1e-6:
+        tt = self._truth_t
+        i = int(np.searchsorted(tt, t))
+        cands = [k for k in (i - 1, i) if 0 <= k < len(tt)]
+        if not cands:
+            return
+        i = min(cands, key=lambda k: abs(tt[k] - t))
+        if abs(tt[i] - t) > TRUTH_MATCH_S:
             return
         tr = self._truth[i]  # type: ignore[index]
         q_est = row[10:14]
@@ -205,7 +238,7 @@ class Recorder:
         step = max(1, len(tr) // TRAJ_POINTS)
         pts = [local_ned(math.radians(r[1]), math.radians(r[2]), r[3], origin) for r in tr[::step]]
         self.rec.log("/world/trajectory/truth", self.rr.LineStrips3D([np.array(pts)], colors=[COLORS["truth"]],
-                                                                        radii=[0.15]), static=True)
+                                                                        radii=_line_radius()), static=True)
 
     def _trajectory(self, t: float, ned: np.ndarray) -> None:
         self._traj_n += 1
@@ -218,15 +251,18 @@ class Recorder:
             self._traj_last = t
             self.rec.set_time("sensor_time", duration=t)
             self.rec.log("/world/trajectory/estimated",
-                         self.rr.LineStrips3D([np.array(self._traj)], colors=[COLORS["estimated"]], radii=[0.12]))
+                         self.rr.LineStrips3D([np.array(self._traj)], colors=[COLORS["estimated"]], radii=_line_radius()))
 
     def on_event(self, t: float | None, level: str, text: str) -> None:
         """A state change or warning into the text log."""
         rr = self.rr
         lvl = {"INFO": rr.TextLogLevel.INFO, "WARNING": rr.TextLogLevel.WARN, "ERROR": rr.TextLogLevel.ERROR}.get(
             level, rr.TextLogLevel.INFO)
-        if t is not None:
-            self.rec.set_time("sensor_time", duration=t)
+        if t is None:
+            # an event before the first sample still belongs on the timeline (a static
+            # row would hide every later one)
+            t = self._last_sample_t if self._last_sample_t is not None else 0.0
+        self.rec.set_time("sensor_time", duration=t)
         self.rec.log("/log", rr.TextLog(text, level=lvl))
 
     def on_counters(self, t: float, counters: dict[str, int]) -> None:

@@ -27,13 +27,14 @@ import subprocess
 import sys
 import tempfile
 import time
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
 PACKAGES = "xvfb mesa-vulkan-drivers libvulkan1"
 INSTALL_HINT = f"install them with: apt-get install -y {PACKAGES} (or scripts/install_viewer_deps.sh)"
 ICD_DIRS = ("/usr/share/vulkan/icd.d", "/etc/vulkan/icd.d", "/usr/local/share/vulkan/icd.d")
-XVFB_SCREEN = "1920x1080x24"
+XVFB_SCREEN = "1920x1080x24"  # at least; grown to fit the window
 
 
 class ViewerUnavailable(RuntimeError):
@@ -83,12 +84,13 @@ def check_dependencies() -> tuple[str, str]:
     return xvfb, software_vulkan_icd()
 
 
-def _start_xvfb(xvfb: str, log_path: Path, timeout: float = 10.0) -> tuple[subprocess.Popen[bytes], int]:
+def _start_xvfb(xvfb: str, log_path: Path, screen: str = XVFB_SCREEN,
+                timeout: float = 10.0) -> tuple[subprocess.Popen[bytes], int]:
     """Start Xvfb on the first free display number (``-displayfd``); return (process, number)."""
     r, w = os.pipe()
     with open(log_path, "wb") as log:
         proc = subprocess.Popen(
-            [xvfb, "-displayfd", str(w), "-screen", "0", XVFB_SCREEN, "-nolisten", "tcp", "-noreset"],
+            [xvfb, "-displayfd", str(w), "-screen", "0", screen, "-nolisten", "tcp", "-noreset"],
             stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, pass_fds=(w,), start_new_session=True)
     os.close(w)
     data = b""
@@ -111,6 +113,28 @@ def _start_xvfb(xvfb: str, log_path: Path, timeout: float = 10.0) -> tuple[subpr
         tail = log_path.read_text(errors="replace")[-2000:]
         raise ScreenshotError(f"Xvfb did not start (exit code {proc.returncode}):\n{tail}")
     return proc, int(data.strip())
+
+
+def _park_pointer(display: int, x: int, y: int) -> None:
+    """Move the X pointer to (x, y), away from the viewer: a hovered 3D view draws a tooltip. Best effort."""
+    try:
+        lib = ctypes.CDLL(ctypes.util.find_library("X11") or "libX11.so.6")
+        lib.XOpenDisplay.restype = ctypes.c_void_p
+        lib.XOpenDisplay.argtypes = [ctypes.c_char_p]
+        lib.XDefaultRootWindow.restype = ctypes.c_ulong
+        lib.XDefaultRootWindow.argtypes = [ctypes.c_void_p]
+        lib.XWarpPointer.argtypes = [ctypes.c_void_p, ctypes.c_ulong, ctypes.c_ulong] + [ctypes.c_int] * 2 + \
+            [ctypes.c_uint] * 2 + [ctypes.c_int] * 2
+        lib.XFlush.argtypes = [ctypes.c_void_p]
+        lib.XCloseDisplay.argtypes = [ctypes.c_void_p]
+        dpy = lib.XOpenDisplay(f":{display}".encode())
+        if not dpy:
+            return
+        lib.XWarpPointer(dpy, 0, lib.XDefaultRootWindow(dpy), 0, 0, 0, 0, x, y)
+        lib.XFlush(dpy)
+        lib.XCloseDisplay(dpy)
+    except (OSError, AttributeError):
+        pass
 
 
 def _stop(proc: subprocess.Popen[bytes], grace: float = 5.0) -> None:
@@ -143,13 +167,15 @@ def _resize(png: Path, size: tuple[int, int]) -> None:
 
 
 def review_blueprint(rrd: Path, out_rbl: Path) -> None:
-    """Write ``out_rbl``: the recording's stored blueprint, with the time cursor at the end and side panels hidden.
+    """Write ``out_rbl``: the recording's stored blueprint, set up to show the whole run.
 
     The layout (containers, views, shares) is copied chunk by chunk from the
     blueprint stored in ``rrd``; on top of it the time panel is set to
     *following* (cursor on the newest data, so the 3D view and the text log
-    show the whole run) and the blueprint and selection panels are hidden.
-    Without a stored blueprint the viewer's automatic layout is used.
+    show the whole run), every time-series view's x axis spans all the data
+    (following alone scrolls the plots to the last stretch) and the blueprint
+    and selection panels are hidden. Without a stored blueprint the viewer's
+    automatic layout is used.
     """
     import rerun as rr
     import rerun.blueprint as rrb
@@ -170,10 +196,23 @@ def review_blueprint(rrd: Path, out_rbl: Path) -> None:
 
     stream = rr.RecordingStream._from_native(bindings.new_blueprint(
         application_id=app, make_default=False, make_thread_default=False, default_enabled=True))
-    stream.send_chunks(list(reader.stream(store=stored[-1])))
+    chunks = list(reader.stream(store=stored[-1]))
+    stream.send_chunks(chunks)
+    series_views = set()
+    for ch in chunks:
+        if ch.entity_path.startswith("/view/") and ch.entity_path.count("/") == 2:
+            batch = ch.to_record_batch()
+            if "ViewBlueprint:class_identifier" in batch.schema.names:
+                kinds = batch.column(batch.schema.get_field_index("ViewBlueprint:class_identifier")).to_pylist()
+                if any(k and k[0] == "TimeSeries" for k in kinds):
+                    series_views.add(ch.entity_path)
     stream.set_time("blueprint", sequence=2**62)  # after every stored row: these values win
     for part in parts:
         part._log_to_stream(stream)
+    whole = rrb.TimeAxis(view_range=rrb.TimeRange(start=rrb.TimeRangeBoundary.infinite(),
+                                                  end=rrb.TimeRangeBoundary.infinite()))
+    for view in sorted(series_views):
+        stream.log(f"{view}/TimeAxis", whole)
     bindings.save_blueprint(str(out_rbl), stream.to_native())
 
 
@@ -222,7 +261,10 @@ def screenshot(rrd: Path, out_png: Path, size: tuple[int, int] = (1600, 900), ti
         runtime.mkdir(mode=0o700)
         os.chmod(runtime, 0o700)
         viewer_log = tmpdir / "viewer.log"
-        xserver, display = _start_xvfb(xvfb, tmpdir / "xvfb.log")
+        # the viewer draws at 2 px/pt: a screen larger than the window leaves room to park the pointer
+        sw, sh = max(1920, 2 * w + 64), max(1080, 2 * h + 64)
+        xserver, display = _start_xvfb(xvfb, tmpdir / "xvfb.log", f"{sw}x{sh}x24")
+        _park_pointer(display, sw - 1, sh - 1)
         viewer: subprocess.Popen[bytes] | None = None
         try:
             env = dict(os.environ)
@@ -239,8 +281,12 @@ def screenshot(rrd: Path, out_png: Path, size: tuple[int, int] = (1600, 900), ti
             files = [str(rrd.resolve())]
             if at_end:  # after the recording: the viewer activates the blueprint loaded last
                 rbl = tmpdir / "review.rbl"
-                review_blueprint(rrd, rbl)
-                files.append(str(rbl))
+                try:
+                    review_blueprint(rrd, rbl)
+                    files.append(str(rbl))
+                except Exception as exc:  # private rerun API changed: the stored layout as opened is still useful
+                    warnings.warn(f"cannot set the viewer to the end of the run ({exc}); "
+                                  "rendering the recording as it opens", RuntimeWarning, stacklevel=2)
             args = [*cmd, *files, "--renderer", "vulkan", "--port", "0", "--bind", "127.0.0.1",
                     "--window-size", f"{w}x{h}", "--screenshot-to", str(out_png.resolve())]
             with open(viewer_log, "wb") as log:
@@ -276,11 +322,12 @@ def _size(text: str) -> tuple[int, int]:
         raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, e.g. 1600x900, not {text!r}") from None
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m mavins.review FILE.rrd --screenshot OUT.png``: 0 on success, 1 on failure, 2 on bad usage."""
-    p = argparse.ArgumentParser(prog="python -m mavins.review",
-                                description="Render a Rerun recording to a PNG with the native viewer, headless "
-                                            "(Xvfb + Vulkan software rendering).")
+DESCRIPTION = ("Render a Rerun recording to a PNG with Rerun's native viewer, headless "
+               "(Xvfb + Vulkan software rendering; Debian packages xvfb and mesa-vulkan-drivers).")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of ``mavins review`` (also ``python -m mavins.review``)."""
     p.add_argument("rrd", type=Path, metavar="FILE.rrd", help="recording to render")
     p.add_argument("--screenshot", type=Path, required=True, metavar="OUT.png", help="PNG to write")
     p.add_argument("--size", type=_size, default=(1600, 900), metavar="WxH", help="window size (default 1600x900)")
@@ -289,19 +336,28 @@ def main(argv: Sequence[str] | None = None) -> int:
                    help="the viewer's opening state (cursor near the start, side panels as stored) instead of "
                         "the whole run with side panels hidden")
     p.add_argument("--native-scale", action="store_true", help="keep the viewer's pixel scale (2x the window size)")
-    args = p.parse_args(argv)
+
+
+def run(args: argparse.Namespace, prog: str) -> int:
+    """Render as the parsed options say: 0 on success, 1 on viewer failure, 2 on bad usage."""
     try:
         screenshot(args.rrd, args.screenshot, args.size, args.timeout, at_end=not args.as_opened,
                    native_scale=args.native_scale)
     except (FileNotFoundError, ValueError) as exc:
-        print(f"{p.prog}: error: {exc}", file=sys.stderr)
+        print(f"{prog}: error: {exc}", file=sys.stderr)
         return 2
     except (ViewerUnavailable, ScreenshotError) as exc:
-        print(f"{p.prog}: error: {exc}", file=sys.stderr)
+        print(f"{prog}: error: {exc}", file=sys.stderr)
         return 1
-    print(f"{p.prog}: wrote {args.screenshot}", file=sys.stderr)
+    print(f"{prog}: wrote {args.screenshot}", file=sys.stderr)
     return 0
 
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m mavins.review FILE.rrd --screenshot OUT.png``."""
+    p = argparse.ArgumentParser(prog="python -m mavins.review", description=DESCRIPTION)
+    add_arguments(p)
+    return run(p.parse_args(argv), p.prog)
 
 if __name__ == "__main__":
     sys.exit(main())
