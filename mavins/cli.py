@@ -223,6 +223,10 @@ def _nav_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--raw-gyro-scale", type=float, default=1e-3, metavar="RAD_S",
                    help="RAW_IMU gyro scale, rad/s per count (ArduPilot: 1 mrad/s)")
     g.add_argument("--target-system", type=int, default=None, metavar="SYSID", help="accept IMU data only from this system")
+    g.add_argument("--max-accel", type=float, default=16 * 9.80665, metavar="M_S2", help="accelerometer range")
+    g.add_argument("--max-gyro", type=float, default=2000.0, metavar="DEG_S", help="gyro range")
+    g.add_argument("--max-gap", type=float, default=1.0, metavar="S",
+                   help="a longer gap in sensor time is not integrated and marks the solution degraded")
     g.add_argument("--config", type=Path, metavar="FILE.toml", help="TOML file with any of these options (command line wins)")
 
 
@@ -259,14 +263,17 @@ def _engine_config(args: argparse.Namespace):  # type: ignore[no-untyped-def]
         pass
     return EngineConfig(lat=args.lat, lon=args.lon, alt=args.alt, heading=heading, declination=args.declination,
                         align=args.align, imu_rates=args.imu_rates, rate=args.rate, samples=args.samples,
-                        gyro_bias=args.gyro_bias)
+                        gyro_bias=args.gyro_bias, max_gap=args.max_gap)
 
 
 def _ingest_config(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     from .ingest import IngestConfig
 
+    import math
+
     return IngestConfig(message=_IMU_NAMES[args.imu], imu_id=args.imu_id, target_system=args.target_system,
-                        raw_acc_scale=args.raw_acc_scale, raw_gyro_scale=args.raw_gyro_scale)
+                        raw_acc_scale=args.raw_acc_scale, raw_gyro_scale=args.raw_gyro_scale,
+                        max_accel=args.max_accel, max_gyro=math.radians(args.max_gyro))
 
 
 def _add_run(sub: argparse._SubParsersAction) -> None:
@@ -297,10 +304,6 @@ def _add_run(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--peer-timeout", type=float, default=10.0, metavar="S",
                    help="stop sending to a listening link's peer after S seconds of silence")
     p.add_argument("--max-peers", type=int, default=8, metavar="N", help="most peers a listening link sends to")
-    p.add_argument("--max-accel", type=float, default=16 * 9.80665, metavar="M_S2", help="accelerometer range")
-    p.add_argument("--max-gyro", type=float, default=2000.0, metavar="DEG_S", help="gyro range")
-    p.add_argument("--max-gap", type=float, default=1.0, metavar="S",
-                   help="a longer gap in sensor time marks the solution degraded")
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     _nav_options(p)
     p.set_defaults(func=_cmd_run, parser=p)
@@ -313,7 +316,6 @@ def _setup_logging(verbose: bool) -> None:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    import math
     import signal
     import threading
 
@@ -338,10 +340,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
             print(f"mavins run: error: {exc}", file=sys.stderr)
             return EXIT_USAGE
         state = args.signing_key.with_name(args.signing_key.name + ".timestamp")
-    engine_cfg.max_gap = args.max_gap
     ingest_cfg = _ingest_config(args)
-    ingest_cfg.max_accel = args.max_accel
-    ingest_cfg.max_gyro = math.radians(args.max_gyro)
     cfg = ServiceConfig(master=args.master, outs=args.out, sysid=args.sysid, compid=args.compid, tlog=args.tlog,
                         solution=args.output, request_imu=args.request_imu, signing_key=key, signing_state=state,
                         peers=PeerPolicy(timeout=args.peer_timeout, max_peers=args.max_peers),

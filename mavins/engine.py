@@ -79,7 +79,7 @@ class Engine:
     _vehicle_yaw: float | None = field(init=False, default=None)
     _acc: list[np.ndarray] = field(init=False, default_factory=list)
     _t_align0: float = field(init=False, default=0.0)
-    _last_out: int = field(init=False, default=-1)
+    _next_out: int | None = field(init=False, default=None)
     _last_t: float | None = field(init=False, default=None)
     _dt_nominal: float | None = field(init=False, default=None)
     _gyro_last: tuple[float, float, float] = field(init=False, default=(0.0, 0.0, 0.0))
@@ -99,6 +99,8 @@ class Engine:
         )
         if None not in (self.cfg.lat, self.cfg.lon, self.cfg.alt):
             self.set_position(float(self.cfg.lat), float(self.cfg.lon), float(self.cfg.alt), "options")  # type: ignore[arg-type]
+        else:
+            self._event("INFO", "WAITING: for an initial position (--lat/--lon/--alt or the vehicle's GPS)")
 
     # -- inputs besides the IMU ------------------------------------------------
     def set_position(self, lat: float, lon: float, alt: float, source: str) -> None:
@@ -122,7 +124,7 @@ class Engine:
         self._acc.clear()
         self._last_t = None
         self._dt_nominal = None
-        self._last_out = -1
+        self._next_out = None
         self.counters["restarts"] += 1
         self._set_state(State.WAITING if self._pos is None else State.ALIGNING, reason)
 
@@ -242,12 +244,20 @@ class Engine:
         r = sd.push_rate_scalars(s, self._kcfg, smp.t, gx, gy, gz, f[0], f[1], f[2])  # type: ignore[arg-type]
         if r != 1:
             return None
-        k = math.floor(s[sd.S_T] * self.cfg.rate + 1e-9)  # type: ignore[index]
-        if k <= self._last_out:
+        if not self._output_due(float(s[sd.S_T])):  # type: ignore[index]
             return None
-        self._last_out = k
         sd.solution_row(s, self._kcfg, self._row)  # type: ignore[arg-type]
         return Output(self._row.copy(), np.array(self._gyro_last), self._pos, self.degraded)  # type: ignore[arg-type]
+
+    def _output_due(self, t: float) -> bool:
+        """One output set each time sensor time crosses a multiple of 1/rate (CONVENTIONS.md
+        ``--rate``): on the first attitude update at or after it. An update interval that
+        spans two multiples (rate close to the update rate, jittery times) yields one set."""
+        k = math.floor(t * self.cfg.rate + 1e-9)
+        if self._next_out is not None and k < self._next_out:
+            return False
+        self._next_out = k + 1
+        return True
 
     # -- events ----------------------------------------------------------------
     def _set_state(self, state: State, why: str) -> None:

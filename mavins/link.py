@@ -1,7 +1,7 @@
 """Links in and out: MAVLink frames with the address they came from.
 
-UDP (``udpin:HOST:PORT`` listens, ``udpout:HOST:PORT`` / ``udp:HOST:PORT``
-sends to a fixed address) is handled here directly, so that every datagram's
+UDP (``udpin:HOST:PORT`` and, as in pymavlink, ``udp:HOST:PORT`` listen;
+``udpout:HOST:PORT`` sends to a fixed address) is handled here directly, so that every datagram's
 sender is known: output goes only to fixed destinations and to *peers* that
 earned it (sent a valid frame, or an authenticated one when a key is set),
 never to whoever sends a datagram. Peers expire after a silence and their
@@ -84,7 +84,7 @@ class UdpLink:
     def __init__(self, url: str, policy: PeerPolicy | None = None) -> None:
         self.url = url
         self.policy = policy or PeerPolicy()
-        self.listen = url.startswith("udpin:")
+        self.listen = url.startswith(("udpin:", "udp:"))
         scheme = url.split(":", 1)[0]
         host, port = _host_port(url, scheme)
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)

@@ -101,8 +101,19 @@ def heartbeat(mav: mavlink.MAVLink, navigating: bool) -> mavlink.MAVLink_message
     return mav.heartbeat_encode(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, status)
 
 
-def statustext(mav: mavlink.MAVLink, level: str, text: str) -> mavlink.MAVLink_message:
-    """STATUSTEXT with a MAV_SEVERITY from an event level (text cut to 50 bytes)."""
+def statustext(mav: mavlink.MAVLink, level: str, text: str, text_id: int = 0) -> list[mavlink.MAVLink_message]:
+    """STATUSTEXT with a MAV_SEVERITY from an event level.
+
+    Texts over 50 bytes go out in MAVLink 2 chunks sharing ``id`` (1..65535)
+    with ``chunk_seq`` 0, 1, ...; a single chunk carries ``id`` 0.
+    """
     sev = {"INFO": mavlink.MAV_SEVERITY_INFO, "WARNING": mavlink.MAV_SEVERITY_WARNING,
            "ERROR": mavlink.MAV_SEVERITY_ERROR}.get(level, mavlink.MAV_SEVERITY_NOTICE)
-    return mav.statustext_encode(sev, ("mavins: " + text).encode("utf-8")[:50])
+    data = ("mavins: " + text).encode("utf-8")
+    if len(data) <= 50:
+        return [mav.statustext_encode(sev, data)]
+    chunks = [data[i : i + 50] for i in range(0, len(data), 50)]
+    if len(chunks[-1]) == 50:
+        chunks.append(b"")  # an empty chunk ends a text whose length is a multiple of 50
+    tid = text_id % 65535 + 1
+    return [mav.statustext_encode(sev, c, tid, k) for k, c in enumerate(chunks)]

@@ -100,6 +100,8 @@ class Service:
         self._last_imu_wall = 0.0
         self._last_request = 0.0
         self._cpu0 = (time.process_time(), time.monotonic())
+        self._text_id = 0
+        self._pending_text: list[tuple[str, str]] = []
 
     # -- optional parts ----------------------------------------------------------
     def attach_recorder(self, recorder: object) -> None:
@@ -136,7 +138,12 @@ class Service:
             events = self.pipeline.engine.take_events()
         for level, text in events:
             log.log(logging.WARNING if level == "WARNING" else logging.INFO, text)
-            self._send([publish.statustext(self.mav, level, text)])
+            self._text_id += 1
+            msgs = publish.statustext(self.mav, level, text, self._text_id)
+            if self._sysid_known:
+                self._send(msgs)
+            else:
+                self._pending_text = (self._pending_text + [(level, text)])[-20:]  # bounded until we know who we are
 
     # -- receiving -----------------------------------------------------------------
     def _handle(self, msg: mavlink.MAVLink_message, addr: object) -> None:
@@ -168,9 +175,18 @@ class Service:
             self.pipeline.recorder = None
             self._optional_failed("recording", exc)
             out = None
-        if not self._sysid_known and self.pipeline.vehicle_sysid is not None:
-            self.mav.srcSystem = self.pipeline.vehicle_sysid
-            self._sysid_known = True
+        if not self._sysid_known:
+            vehicle = self.pipeline.vehicle_sysid
+            if vehicle is None and name == "HEARTBEAT" and msg.autopilot != mavlink.MAV_AUTOPILOT_INVALID \
+                    and msg.type != mavlink.MAV_TYPE_GCS:
+                vehicle = msg.get_srcSystem()  # an autopilot's heartbeat names the vehicle
+            if vehicle is not None:
+                self.mav.srcSystem = vehicle
+                self._sysid_known = True
+                pending, self._pending_text = self._pending_text, []
+                for level, text in pending:
+                    self._text_id += 1
+                    self._send(publish.statustext(self.mav, level, text, self._text_id))
         if name in IMU_MESSAGES:
             self._last_imu_wall = time.monotonic()
         elif name == "COMMAND_ACK" and msg.command == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:

@@ -1,0 +1,199 @@
+"""``mavins replay``: the live pipeline over recorded logs.
+
+1. Replay equals live. ``mavins run --tlog X.tlog -o live.csv`` serves a real
+   UDP stream from the simulator (a subprocess, paced); ``mavins replay X.tlog
+   -o replay.csv`` with the same navigation options must write the same file,
+   byte for byte: the service navigates on sensor time only, and the tlog keeps
+   every message it handled, in order (CONVENTIONS.md "MAVLink").
+2. Real data. ``data/px4-sample/sample.ulg`` (PX4, hand-moved board, then at
+   rest; data/README.md) replayed with the position given (the log has no GPS),
+   ``--align 2`` (the board rests only for the first 2.2 s) and ``--heading`` =
+   PX4's own yaw at the end of the alignment window (a .ulg replay has no
+   ATTITUDE message). The solution must track PX4's attitude estimate
+   (``truth.csv.gz``) within ``PX4_LIMIT_DEG`` over the whole log, and the
+   default ``--gyro-bias estimate`` must be what makes that possible: without it
+   the ~0.2 deg/s bias of this board drifts the attitude by over 10 deg.
+
+Limit for (2): PX4's estimate is a filter output, not truth (meta.json
+"reference"). data/README.md's own check, a perfect 10 s integration of these
+gyros with the rest bias removed, already differs from it by up to 1.5 deg
+during the motion; here the bias comes from 2 s of rest only and the
+integration runs 67 s, so 3 deg is "within a few degrees" with about 1 deg of
+room over what was measured (max 1.95 deg, docs/service.md).
+"""
+
+from __future__ import annotations
+
+import gzip
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+PX4 = REPO / "data" / "px4-sample"
+MAVINS = [str(Path(sys.executable).parent / "mavins")] if (Path(sys.executable).parent / "mavins").is_file() \
+    else [sys.executable, "-m", "mavins.cli"]
+ENV = {**os.environ, "MAVLINK20": "1", "PYTHONUNBUFFERED": "1"}
+
+START = ("47.397742", "8.545594", "488.0")  # sim/scenarios/flight.toml [start]
+PX4_ALIGN_S = 2.0
+PX4_LIMIT_DEG = 3.0
+PX4_NO_BIAS_MIN_DEG = 10.0  # without the bias estimate: 0.21 deg/s over 67 s is ~14 deg
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def wait_for_line(path: Path, text: str, proc: subprocess.Popen, timeout: float = 120.0) -> None:
+    """``mavins run`` prints "listening on" once its kernels are loaded (compiled after a core change)."""
+    t_end = time.monotonic() + timeout
+    while time.monotonic() < t_end:
+        if text in path.read_text(errors="replace"):
+            return
+        if proc.poll() is not None:
+            raise AssertionError(f"exited ({proc.returncode}) before {text!r}:\n{path.read_text()}")
+        time.sleep(0.05)
+    raise AssertionError(f"no {text!r} within {timeout} s:\n{path.read_text()}")
+
+
+def mavins(*args: str, cwd: Path, timeout: float = 120.0) -> subprocess.CompletedProcess:
+    return subprocess.run([*MAVINS, *args], cwd=cwd, env=ENV, capture_output=True, text=True, timeout=timeout)
+
+
+# -- 1. replay equals live -----------------------------------------------------------
+NAV_OPTIONS = ["--lat", START[0], "--lon", START[1], "--alt", START[2], "--heading", "vehicle", "--align", "5",
+               "--rate", "25", "--samples", "3"]
+
+
+@pytest.fixture(scope="module")
+def live(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, str]:
+    """A consumer-grade stream (noise, bias, timing jitter, dropped samples) served live: (tlog, csv, log)."""
+    tmp_path = tmp_path_factory.mktemp("live")
+    port = free_udp_port()
+    tlog, live_csv = tmp_path / "live.tlog", tmp_path / "live.csv"
+    log_path = tmp_path / "service.log"
+    with open(log_path, "w") as log:
+        svc = subprocess.Popen([*MAVINS, "run", "--master", f"udpin:127.0.0.1:{port}", "--tlog", str(tlog),
+                                "-o", str(live_csv), *NAV_OPTIONS], stdout=log, stderr=subprocess.STDOUT, env=ENV,
+                               cwd=tmp_path)
+    try:
+        wait_for_line(log_path, "listening on", svc)
+        sim = mavins("sim", "flight", "--grade", "consumer", "--seed", "3", "--duration", "40", "--speed", "10",
+                     "--stream", f"udpout:127.0.0.1:{port}", cwd=tmp_path)
+        assert sim.returncode == 0, sim.stderr
+        time.sleep(1.0)  # let the service finish what is queued
+        svc.send_signal(signal.SIGTERM)
+        svc.wait(20)
+    finally:
+        if svc.poll() is None:
+            svc.kill()
+            svc.wait(5)
+    service_log = log_path.read_text()
+    assert svc.returncode == 0, service_log
+    return tlog, live_csv, service_log
+
+
+def test_replay_of_the_live_tlog_writes_the_same_solution(live: tuple[Path, Path, str], tmp_path: Path) -> None:
+    tlog, live_csv, service_log = live
+    assert "final state: NAVIGATING" in service_log, service_log
+    rows_live = live_csv.read_text().splitlines()
+    assert len(rows_live) > 30 * 25, f"{len(rows_live)} rows: the live run navigated for ~35 s at 25 Hz"
+    again = tmp_path / "replay.csv"
+    res = mavins("replay", str(tlog), "-o", str(again), *NAV_OPTIONS, cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert "final state NAVIGATING" in res.stderr and "heading from vehicle ATTITUDE" in res.stderr, res.stderr
+    assert again.read_bytes() == live_csv.read_bytes(), "replay differs from live"
+
+
+def test_replay_with_other_options_differs(live: tuple[Path, Path, str], tmp_path: Path) -> None:
+    """Control: the identity above is not an accident of options being ignored."""
+    tlog, live_csv, _ = live
+    other = [*NAV_OPTIONS[:-2], "--samples", "2"]
+    res = mavins("replay", str(tlog), "-o", str(tmp_path / "other.csv"), *other, cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    a = live_csv.read_text().splitlines()
+    b = (tmp_path / "other.csv").read_text().splitlines()
+    assert a[0] == b[0] and a[1:] != b[1:]
+
+
+# -- 2. real data: PX4 -----------------------------------------------------------------
+def _px4_truth() -> np.ndarray:
+    with gzip.open(PX4 / "truth.csv.gz", "rt") as fh:
+        return np.loadtxt(fh, delimiter=",", skiprows=1)  # t,qw,qx,qy,qz,roll,pitch,yaw
+
+
+def _px4_align_end() -> float:
+    """Sensor time at which a --align 2 alignment ends: the first sample at or after t0 + 2 s."""
+    with gzip.open(PX4 / "imu_rates.csv.gz", "rt") as fh:
+        t = np.loadtxt(fh, delimiter=",", skiprows=1, usecols=0)
+    return float(t[np.searchsorted(t, t[0] + PX4_ALIGN_S)])
+
+
+def _qmul(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    pw, px, py, pz = p.T
+    qw, qx, qy, qz = q.T
+    return np.stack([pw * qw - px * qx - py * qy - pz * qz, pw * qx + px * qw + py * qz - pz * qy,
+                     pw * qy - px * qz + py * qw + pz * qx, pw * qz + px * qy - py * qx + pz * qw], -1)
+
+
+def px4_errors(nav_csv: Path, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Solution times and the angle (deg) between our attitude and PX4's at those times (nlerp of truth)."""
+    nav = np.loadtxt(nav_csv, delimiter=",", skiprows=1)
+    t = nav[:, 0]
+    q = nav[:, 10:14]
+    i = np.clip(np.searchsorted(truth[:, 0], t), 1, len(truth) - 1)
+    t0, t1 = truth[i - 1, 0], truth[i, 0]
+    q0, q1 = truth[i - 1, 1:5], truth[i, 1:5]
+    q1 = np.where((np.sum(q0 * q1, 1) < 0)[:, None], -q1, q1)
+    w = ((t - t0) / (t1 - t0))[:, None]
+    qt = (1 - w) * q0 + w * q1
+    qt /= np.linalg.norm(qt, axis=1)[:, None]
+    d = _qmul(qt * np.array([1.0, -1.0, -1.0, -1.0]), q)
+    return t, np.degrees(2 * np.arccos(np.clip(np.abs(d[:, 0]), 0.0, 1.0)))
+
+
+@pytest.fixture(scope="module")
+def px4_setup() -> tuple[np.ndarray, float, list[str]]:
+    truth = _px4_truth()
+    t_end = _px4_align_end()
+    yaw0 = float(np.interp(t_end, truth[:, 0], np.unwrap(truth[:, 7], period=360.0)))
+    opts = ["--lat", "47.4", "--lon", "8.5", "--alt", "500", "--align", str(PX4_ALIGN_S), "--heading", f"{yaw0:.3f}"]
+    return truth, yaw0, opts
+
+
+def test_px4_ulg_tracks_px4_attitude(tmp_path: Path, px4_setup) -> None:
+    truth, yaw0, opts = px4_setup
+    assert -40.0 < yaw0 < -30.0  # data/README.md: about -33.7 deg
+    out = tmp_path / "px4.csv"
+    res = mavins("replay", str(PX4 / "sample.ulg"), "-o", str(out), *opts, cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert "final state NAVIGATING" in res.stderr, res.stderr
+    t, err = px4_errors(out, truth)
+    # the solution covers the log from the end of the alignment to the end
+    assert t[0] < _px4_align_end() + 0.05 and t[-1] > 181.0
+    # the motion (hand-moved, up to ~28 deg away from the start attitude) is inside the checked span
+    moving = (t > 114.8) & (t < 118.7)
+    assert moving.sum() > 100
+    print(f"\nPX4 sample.ulg vs PX4 attitude: max {err.max():.3f} deg (t = {t[err.argmax()]:.2f} s), "
+          f"final {err[-1]:.3f} deg, during the motion max {err[moving].max():.3f} deg")
+    assert err.max() < PX4_LIMIT_DEG
+
+
+def test_px4_gyro_bias_estimate_is_what_keeps_it_on_track(tmp_path: Path, px4_setup) -> None:
+    truth, _, opts = px4_setup
+    out = tmp_path / "px4-nobias.csv"
+    res = mavins("replay", str(PX4 / "sample.ulg"), "-o", str(out), *opts, "--gyro-bias", "none", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    _, err = px4_errors(out, truth)
+    print(f"\nPX4 sample.ulg with --gyro-bias none: final {err[-1]:.2f} deg")
+    assert err[-1] > PX4_NO_BIAS_MIN_DEG
