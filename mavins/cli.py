@@ -182,7 +182,8 @@ def _cmd_sim(args: argparse.Namespace) -> int:
     from sim.generate import generate, write
 
     try:
-        run = generate(scenario, duration=args.duration, rate=args.rate, seed=args.seed, grade=args.grade)
+        run = generate(scenario, duration=args.duration, rate=args.rate, seed=args.seed, grade=args.grade,
+                       usec_grid=args.stream is not None)
     except ValueError as exc:
         print(f"mavins sim: error: {exc}", file=sys.stderr)
         return EXIT_USAGE

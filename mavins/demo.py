@@ -135,7 +135,7 @@ def run_demo(
     from sim.stream import StreamOptions, stream
 
     stop = stop or threading.Event()
-    run = generate(load(scenario), duration=duration, seed=seed, grade=grade)
+    run = generate(load(scenario), duration=duration, seed=seed, grade=grade, usec_grid=True)
     p_in, p_out = free_udp_port(), free_udp_port()
     init = run.init()
     engine_cfg = EngineConfig(lat=init.lat, lon=init.lon, alt=init.h, heading=heading, align=5.0)

@@ -43,9 +43,12 @@ class SimRun:
 
 def generate(
     scenario: Scenario, *, duration: float | None = None, rate: float | None = None, seed: int = 0,
-    grade: str | None = None,
+    grade: str | None = None, usec_grid: bool = False,
 ) -> SimRun:
-    """Simulate a scenario for ``duration`` s at ``rate`` Hz with the IMU ``grade``."""
+    """Simulate a scenario for ``duration`` s at ``rate`` Hz with the IMU ``grade``.
+
+    ``usec_grid`` puts the samples on whole microseconds (for MAVLink streaming).
+    """
     traj = build(scenario)
     length = traj.t - traj.t0
     dur = duration if duration is not None else (scenario.duration or length)
@@ -57,7 +60,7 @@ def generate(
     hz = rate if rate is not None else scenario.rate
     if hz <= 0:
         raise ValueError(f"rate must be positive, got {hz}")
-    exact = simulate(traj, hz, dur)
+    exact = simulate(traj, hz, dur, usec_grid=usec_grid)
     g = grade if grade is not None else scenario.grade
     model = errors.grade(g)
     t, dth, dv, kept = errors.apply(model, exact.t, exact.dtheta, exact.dv, seed, t_start=exact.t0)

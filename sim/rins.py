@@ -8,9 +8,9 @@ Motion model (the paper's, eq. 2): the body frame b cones about the z axis of
 a non-rotating reference frame r with half-angle alpha and, on a turntable,
 turns about z_r through the angle a(t):
 
-    Q(t) = Q2(t) (x) Q1(t),  Q2 = [cos a/2, sin a/2 cos psi, sin a/2 sin psi, 0]
-                                  (alpha in the half-angles), psi = wc t + a(t)
-                             Q1 = [cos a/2, 0, 0, sin a/2]  (a the turntable angle)
+    Q(t) = Q2(t) (x) Q1(t),
+    Q2 = [cos(alpha/2), sin(alpha/2) cos psi, sin(alpha/2) sin psi, 0],  psi = wc t + a(t),
+    Q1 = [cos(a/2), 0, 0, sin(a/2)]  (a = turntable angle)
 
 which multiplies out to eq. (2) for ``a = wr t``:
 ``Q = [cos(alpha/2) cos(a/2), sin(alpha/2) cos(wc t + a/2),
@@ -243,6 +243,37 @@ def coning_residual(n: int, s: float, wc: float, T: float) -> float:
     alg = sum(float(k) * math.sin((n - 1 - i) * lam) for i, k in enumerate(CONING_COEFFS[n]))
     alg *= 4.0 * s * s * math.sin(0.5 * lam) ** 2
     return alg - 0.5 * s * s * (wc * T - math.sin(wc * T))
+
+
+#: Leading coefficient r_N of the part of the per-update heading error (estimate
+#: minus truth) that is odd in wr: ``r_N alpha^2 (wr T)(wc T)^4`` for N >= 2 and
+#: ``r_1 alpha^2 (wr T)(wc T)^2`` without compensation. Obtained by a series
+#: expansion of :func:`update_error` in alpha, wr/wc and wc T (sympy, exact
+#: rationals); the next order is about ``-(wc T)^2/20`` relative. The paper's
+#: eq. (18) has ``-1/24 alpha^2 (wr T)(wc T)^2`` instead (docs/rins.md).
+ROTATION_COEFFS: dict[int, Fraction] = {
+    1: Fraction(-1, 12),
+    2: Fraction(1, 320),
+    3: Fraction(7, 1296),
+    4: Fraction(209, 35840),
+    5: Fraction(769, 126000),
+    6: Fraction(5389, 855360),
+}
+
+#: Their next-order terms ``q_N alpha^2 (wr T)(wc T)^6`` (N >= 2; same expansion).
+ROTATION_NEXT: dict[int, Fraction] = {
+    2: Fraction(-5, 32256),
+    3: Fraction(-619, 2449440),
+    4: Fraction(-1037, 3440640),
+    5: Fraction(-6409, 18900000),
+    6: Fraction(-949093, 2586608640),
+}
+
+
+def rotation_residual(n: int, alpha: float, wc: float, wr: float, T: float) -> float:
+    """Leading rotation (odd in wr) part of the per-update heading error, rad (estimate minus truth)."""
+    k = 2 if n == 1 else 4
+    return float(ROTATION_COEFFS[n]) * alpha**2 * (wr * T) * (wc * T) ** k
 
 
 def _qmul(p: np.ndarray, q: np.ndarray) -> np.ndarray:

@@ -420,8 +420,16 @@ class SimResult:
         return dict(t=r[0], lat=r[1], lon=r[2], h=r[3], vn=r[4], ve=r[5], vd=r[6], roll=r[7], pitch=r[8], yaw=r[9])
 
 
-def simulate(traj: Trajectory | MotionSpec, rate: float, duration: float | None = None, substeps: int | None = None) -> SimResult:
+def simulate(
+    traj: Trajectory | MotionSpec, rate: float, duration: float | None = None, substeps: int | None = None,
+    usec_grid: bool = False,
+) -> SimResult:
     """Sample a trajectory at ``rate`` Hz: exact increments and truth at every sample.
+
+    Samples lie on the exact grid ``t0 + k/rate``; with ``usec_grid`` they are
+    rounded to whole microseconds so that MAVLink's ``time_usec`` carries them
+    exactly (for streaming; at rates that do not divide 1 MHz the intervals are
+    then slightly uneven, which N-sample algorithms notice).
 
     Sub-steps default to keeping ``2 pi f_max h <= 0.5`` for the highest
     superposed frequency, so the 5-point Gauss-Legendre quadrature error
@@ -431,8 +439,8 @@ def simulate(traj: Trajectory | MotionSpec, rate: float, duration: float | None 
     t_end = spec.t_end if duration is None else spec.t0 + duration
     dt = 1.0 / rate
     n = int(math.floor((t_end - spec.t0) / dt + 1e-9))
-    # Sample times on whole microseconds, so MAVLink's time_usec carries them exactly.
-    t = spec.t0 + np.round(np.arange(1, n + 1) * (1e6 / rate)) / 1e6
+    k = np.arange(1, n + 1)
+    t = spec.t0 + (np.round(k * (1e6 / rate)) / 1e6 if usec_grid else k / rate)
     if substeps is None:
         substeps = max(1, math.ceil(2 * math.pi * spec.max_freq * dt / 0.5), math.ceil(dt / 0.01))
     dtheta = np.empty((n, 3))
