@@ -86,9 +86,13 @@ class Rrd:
         for bp in self.reader.blueprints():
             for ch in self.reader.stream(store=bp):
                 if ch.entity_path.startswith("/view/") and ch.entity_path.count("/") == 2:
-                    d = ch.to_record_batch().to_pydict()
+                    batch = ch.to_record_batch()
+                    # only the ViewBlueprint columns: the time columns are nanosecond timestamps,
+                    # which pyarrow turns into Python objects only with pandas installed
+                    d = {name: batch.column(i).to_pylist() for i, name in enumerate(batch.schema.names)
+                         if name.startswith("ViewBlueprint:")}
                     views.append({k.split(":")[-1]: (v[-1][0] if isinstance(v[-1], list) else v[-1])
-                                  for k, v in d.items() if k.startswith("ViewBlueprint:")})
+                                  for k, v in d.items()})
         return views
 
 
