@@ -117,7 +117,7 @@ def machine_info() -> list[str]:
         f"python:  {platform.python_version()} ({platform.python_implementation()}, {platform.system()} {platform.release()})",
         f"numpy:   {_version('numpy')}, numba: {_version('numba')}, pymavlink: {_dist_version('pymavlink')}, "
         f"rerun-sdk: {_dist_version('rerun-sdk')}, pyins: {_pyins_version()}, mavins: {_dist_version('mavins')}",
-        f"load:    {_load()} (1/5/15 min load average when this was printed)",
+        f"load:    {_load()} (1/5/15 min load average at the start)",
     ]
 
 
@@ -200,6 +200,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if b:
             baselines.append(f"  {name}: {b}")
     print("\n".join(header))
+    print(f"load:    {_load()} at the end")
     if args.quick:
         print("mode:    --quick (short runs; not the figures of record)")
     print()

@@ -92,14 +92,61 @@ def _bin_messages(path: Path) -> Iterator[tuple[float, mavlink.MAVLink_message]]
 
 
 def _tlog_messages(path: Path) -> Iterator[tuple[float, mavlink.MAVLink_message]]:
-    log = mavutil.mavlink_connection(str(path), dialect="common", robust_parsing=True)
+    """Records of a tlog (8-byte big-endian microsecond time + one MAVLink frame), streamed.
+
+    Frames are split by their own length fields and decoded by pymavlink's
+    ``MAVLink.decode`` (CRC checked), the decoder the live path uses; memory
+    stays flat however long the log is. Bytes that are not a frame are
+    reported as BAD_DATA, and reading resumes at the next frame marker.
+    """
+    parser = _parser_for_decode()
     size = max(os.path.getsize(path), 1)
-    while True:
-        m = log.recv_msg()
-        if m is None:
-            return
-        pos = getattr(getattr(log, "f", None), "tell", lambda: 0)()
-        yield min(pos / size, 1.0), m
+    with open(path, "rb") as fh:
+        buf = b""
+        pos = 0
+        offset = 0
+        while True:
+            if len(buf) - pos < 4096:
+                chunk = fh.read(1 << 20)
+                buf = buf[pos:] + chunk
+                offset += pos
+                pos = 0
+                if not chunk and len(buf) < 8 + 8:
+                    return
+            if len(buf) - pos < 8 + 8:
+                return
+            start = pos + 8
+            magic = buf[start]
+            if magic == 0xFD:
+                n = 12 + buf[start + 1] + (13 if buf[start + 2] & 0x01 else 0)
+            elif magic == 0xFE:
+                n = 8 + buf[start + 1]
+            else:
+                nxt = _next_record(buf, pos + 1)
+                yield (offset + pos) / size, mavlink.MAVLink_bad_data(bytearray(buf[pos:nxt][:64]), "not a tlog record")
+                pos = nxt
+                continue
+            frame = buf[start : start + n]
+            pos = start + n
+            try:
+                msg = parser.decode(bytearray(frame))
+            except mavlink.MAVError as exc:
+                msg = mavlink.MAVLink_bad_data(bytearray(frame[:64]), str(exc))
+            yield (offset + pos) / size, msg
+
+
+def _parser_for_decode() -> mavlink.MAVLink:
+    p = mavlink.MAVLink(None)
+    p.robust_parsing = True
+    return p
+
+
+def _next_record(buf: bytes, start: int) -> int:
+    """Index of the next plausible record (8 time bytes then a frame marker) after ``start``."""
+    for i in range(start, len(buf) - 8):
+        if buf[i + 8] in (0xFD, 0xFE):
+            return i
+    return len(buf)
 
 
 def iter_log(path: Path) -> Iterator[tuple[float, mavlink.MAVLink_message]]:
