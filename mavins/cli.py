@@ -156,6 +156,8 @@ def _add_sim(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--speed", default="1", metavar="X|max", help="streaming pace: 1 = real time, 10 = ten times, max = as fast as possible")
     p.add_argument("--sysid", type=int, default=1, help="system id of the simulated autopilot")
+    p.add_argument("--imus", type=_positive_int(1, 3), default=1, metavar="N",
+                   help="IMUs to stream (1..3): extras as HIGHRES_IMU id 1, 2, or with --msg raw as SCALED_IMU2/3")
     p.set_defaults(func=_cmd_sim)
 
 
@@ -194,7 +196,8 @@ def _cmd_sim(args: argparse.Namespace) -> int:
         return 0
     from sim.stream import StreamOptions, stream
 
-    stats = stream(run, args.stream, StreamOptions(msg=args.msg, imu_rates=args.imu_rates, speed=speed, sysid=args.sysid))
+    stats = stream(run, args.stream, StreamOptions(msg=args.msg, imu_rates=args.imu_rates, speed=speed, sysid=args.sysid,
+                                                  imus=args.imus, seed=args.seed))
     print(f"mavins sim: streamed {stats.imu_messages} IMU messages to {args.stream}", file=sys.stderr)
     return 0
 

@@ -6,7 +6,9 @@ time (``time_usec``/``time_boot_ms``):
 * HEARTBEAT at 1 Hz (MAV_TYPE_QUADROTOR, MAV_AUTOPILOT_GENERIC);
 * HIGHRES_IMU (SI units, ``id`` 0) or RAW_IMU (int16 mG and mrad/s, ArduPilot's
   scaling) for every IMU sample; HIGHRES_IMU carries interval averages (like
-  PX4) or instantaneous samples, as chosen;
+  PX4) or instantaneous samples, as chosen; extra IMUs (``imus`` 2 or 3), each
+  with its own sensor errors of the same grade, as HIGHRES_IMU ``id`` 1, 2 or,
+  with RAW_IMU, as SCALED_IMU2 / SCALED_IMU3 (mG, mrad/s);
 * SIM_STATE with the ground truth, sent straight after the IMU message of the
   same instant at ``truth_rate`` (it has no time field: pair it with the IMU
   message before it);
@@ -19,6 +21,7 @@ Pacing: ``speed`` 1 = real time, X = X times faster, None = no pacing.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import threading
 import time
@@ -27,6 +30,7 @@ from typing import Iterator
 
 import numpy as np
 
+from . import errors
 from .generate import SimRun
 from .trajectory import instant_rates
 
@@ -52,6 +56,7 @@ class StreamOptions:
     raw_acc_scale: float = G0 / 1000.0  # m/s^2 per RAW_IMU count
     raw_gyro_scale: float = 1e-3  # rad/s per RAW_IMU count
     seed: int = 0
+    imus: int = 1  # 1..3; extra IMUs: HIGHRES_IMU id 1, 2 (highres) or SCALED_IMU2/3 (raw)
 
 
 @dataclass
@@ -84,6 +89,7 @@ def frames(run: SimRun, mav: mavlink.MAVLink, opts: StreamOptions) -> Iterator[t
         kept = run.kept
         w = w_true[kept] + (run.dtheta - run.exact.dtheta[kept]) / dt[kept]
         f = f_true[kept] + (run.dv - run.exact.dv[kept]) / dt[kept]
+    extra = _extra_imus(run, opts)
     truth = run.exact.truth[1:][run.kept]
     t = run.t
     send_truth = _every(t, opts.truth_rate)
@@ -104,6 +110,15 @@ def frames(run: SimRun, mav: mavlink.MAVLink, opts: StreamOptions) -> Iterator[t
         else:
             out.append(mav.highres_imu_encode(usec, *f[i], *w[i], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 20.0,
                                               HIGHRES_ACC_GYRO, 0))
+        for k, (wk, fk) in enumerate(extra, start=1):
+            if opts.msg == "raw":
+                acc = [int(v) for v in np.clip(np.round(fk[i] / opts.raw_acc_scale), -32768, 32767)]
+                gyr = [int(v) for v in np.clip(np.round(wk[i] / opts.raw_gyro_scale), -32768, 32767)]
+                enc = mav.scaled_imu2_encode if k == 1 else mav.scaled_imu3_encode
+                out.append(enc(usec // 1000 % (2**32), *acc, *gyr, 0, 0, 0, 2000))
+            else:
+                out.append(mav.highres_imu_encode(usec, *fk[i], *wk[i], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 20.0,
+                                                  HIGHRES_ACC_GYRO, k))
         row = truth[i]
         if send_truth[i]:
             q = row[10:14]
@@ -134,6 +149,20 @@ def frames(run: SimRun, mav: mavlink.MAVLink, opts: StreamOptions) -> Iterator[t
             press = 1013.25 * (1 - 2.25577e-5 * row[3]) ** 5.25588 + rng.normal(0.0, 0.012)
             out.append(mav.scaled_pressure_encode(usec // 1000 % (2**32), press, 0.0, 2000, 0))
         yield float(t[i]), out
+
+
+def _extra_imus(run: SimRun, opts: StreamOptions) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Averaged rates of the extra IMUs on the primary's kept samples (own error draws, no drops/jitter)."""
+    if not 1 <= opts.imus <= 3:
+        raise ValueError(f"imus must be 1..3, got {opts.imus}")
+    model = dataclasses.replace(errors.grade(run.grade), jitter_sigma=0.0, drop_probability=0.0)
+    dt = np.diff(np.concatenate(([run.exact.t0], run.exact.t)))[:, None]
+    out = []
+    for k in range(1, opts.imus):
+        _, dth, dv, _ = errors.apply(model, run.exact.t, run.exact.dtheta, run.exact.dv, run.seed + 7919 * k,
+                                     t_start=run.exact.t0)
+        out.append(((dth / dt)[run.kept], (dv / dt)[run.kept]))
+    return out
 
 
 def stream(run: SimRun, url: str, opts: StreamOptions, stop: threading.Event | None = None) -> StreamStats:

@@ -362,3 +362,39 @@ def test_cli_stream_raw(tmp_path) -> None:
     assert len(raw) == 100 and all(m.get_srcSystem() == 7 for m in msgs)
     assert [m.time_usec for m in raw] == [10000 * (k + 1) for k in range(100)]
     assert not any(m.get_type() == "HIGHRES_IMU" for m in msgs)
+
+
+def test_extra_imus_and_the_service_selects_one() -> None:
+    """--imus 3: HIGHRES_IMU ids 0, 1, 2 (or RAW_IMU + SCALED_IMU2/3), each with its own errors;
+    the service's ingest picks one IMU by message and id and navigates on it."""
+    from mavins.engine import EngineConfig
+    from mavins.ingest import IngestConfig
+    from mavins.pipeline import Pipeline
+
+    run = generate(load("static"), duration=12.0, rate=100.0, grade="industrial", seed=3)
+    for msg, names in (("highres", {"HIGHRES_IMU"}), ("raw", {"RAW_IMU", "SCALED_IMU2", "SCALED_IMU3"})):
+        enc = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
+        out = [m for _, ms in frames(run, enc, StreamOptions(msg=msg, imus=3)) for m in ms]
+        imu = [m for m in out if m.get_type() in names]
+        assert len(imu) == 3 * len(run.t)
+        if msg == "highres":
+            by_id = {k: np.array([[m.xgyro, m.ygyro, m.zgyro] for m in imu if m.id == k]) for k in (0, 1, 2)}
+            assert all(len(v) == len(run.t) for v in by_id.values())
+            # same motion, independent errors: different draws, same order of magnitude
+            assert not np.array_equal(by_id[1], by_id[2])
+            assert np.max(np.abs(by_id[1] - by_id[0])) < 0.05
+        else:
+            s2 = [m for m in imu if m.get_type() == "SCALED_IMU2"]
+            assert len(s2) == len(run.t) and all(isinstance(m.xacc, int) for m in s2)
+            assert abs(np.mean([m.zacc for m in s2]) + 1000 * 9.8 / 9.80665) < 30  # about -1 g in mG
+        init = run.init()
+        for message, imu_id in (("HIGHRES_IMU", 1), ("SCALED_IMU2", None)):
+            if (message == "HIGHRES_IMU") != (msg == "highres"):
+                continue
+            p = Pipeline(EngineConfig(lat=init.lat, lon=init.lon, alt=init.h, heading=init.yaw, align=2.0),
+                         IngestConfig(message=message, imu_id=imu_id))
+            dec = mavlink2.MAVLink(None)
+            outs = [o for m in out for mm in dec.parse_buffer(m.pack(enc)) or [] if (o := p.handle(mm)) is not None]
+            assert p.ingest.locked_message == message and p.ingest.locked_id == (imu_id or 0)
+            assert p.ingest.accepted == len(run.t) and p.ingest.rejected["other_imu"] == 2 * len(run.t)
+            assert outs and abs(math.degrees(outs[-1].row[7])) < 1.0  # levelled, static: roll stays near 0
