@@ -5,7 +5,7 @@ Two families, chosen by what the sensor delivers:
 * **Increments** (or interval-averaged rates, which are increments divided by
   the interval): the N-sample algorithms ``dphi = [sum_{i<N} k_{N-i} dtheta_i]
   x dtheta_N`` with the optimal coefficients of CONVENTIONS.md ``--samples``
-  (Lee, Yoon, Lee 1990; Ignagni 1996). Sculling uses the same coefficients
+  (Lee, Yoon et al. 1990; Ignagni 1996). Sculling uses the same coefficients
   (Ignagni 1998, "duality of optimal sculling and coning algorithms"):
   ``dv_scul = sum_{i<N} k_{N-i} (dtheta_i x dv_N + dv_i x dtheta_N)``.
 * **Instantaneous rate samples**: rates linear between samples. For one

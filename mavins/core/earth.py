@@ -27,7 +27,7 @@ def radii(lat: float) -> tuple[float, float]:
     """Meridian and prime-vertical radii ``(R_N, R_E)`` (m) at latitude (rad).
 
     ``R_N = a(1-e^2)/(1-e^2 sin^2 L)^1.5``, ``R_E = a/(1-e^2 sin^2 L)^0.5``
-    (CONVENTIONS.md; [ZS1] ch. 1, Earth ellipsoid).
+    (CONVENTIONS.md "Radii"; WGS-84, NIMA TR8350.2).
     """
     s = np.sin(lat)
     d = 1.0 - E2 * s * s
@@ -111,7 +111,7 @@ def latlon_from_cne(c: np.ndarray) -> tuple[float, float]:
 
 @kernel
 def lla_to_ecef(lat: float, lon: float, h: float) -> np.ndarray:
-    """Earth-fixed Cartesian position (m) of a geodetic point ([ZS1] ch. 1)."""
+    """Earth-fixed Cartesian position (m) of a geodetic point (WGS-84, NIMA TR8350.2)."""
     r_n, r_e = radii(lat)
     cl = np.cos(lat)
     out = np.empty(3)

@@ -69,7 +69,7 @@ def mat_vec(a: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 @kernel
 def quat_mul(p: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """Hamilton product ``p (x) q`` ([DE] section 1, quaternion method)."""
+    """Hamilton product ``p (x) q`` (Savage, Strapdown Analytics, quaternion algebra; Hamilton convention of CONVENTIONS.md)."""
     out = np.empty(4)
     out[0] = p[0] * q[0] - p[1] * q[1] - p[2] * q[2] - p[3] * q[3]
     out[1] = p[0] * q[1] + p[1] * q[0] + p[2] * q[3] - p[3] * q[2]
@@ -115,7 +115,7 @@ def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 @kernel
 def quat_to_dcm(q: np.ndarray) -> np.ndarray:
-    """DCM of a unit quaternion ([DE] section 1, quaternion to DCM)."""
+    """DCM of a unit quaternion, ``v_n = C(q) v_b`` (Savage, Strapdown Analytics, quaternion/DCM relation)."""
     w, x, y, z = q[0], q[1], q[2], q[3]
     c = np.empty((3, 3))
     c[0, 0] = w * w + x * x - y * y - z * z
@@ -246,7 +246,7 @@ def quat_to_euler(q: np.ndarray) -> np.ndarray:
 def rotvec_to_quat(phi: np.ndarray) -> np.ndarray:
     """Exact ``exp(phi)`` as a quaternion ``[cos(s/2), sin(s/2)/s phi]``.
 
-    [TW11] slide "11.2.1 quaternion algorithm" (exact form).
+    Bortz 1971; the exact form of the truncated series in CONVENTIONS.md ``--order``.
     """
     s2 = phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2]
     s = np.sqrt(s2)
@@ -374,7 +374,7 @@ def dcm_rate(c: np.ndarray, w_nb_b: np.ndarray) -> np.ndarray:
 
 @kernel
 def quat_rate(q: np.ndarray, w_nb_b: np.ndarray) -> np.ndarray:
-    """Quaternion kinematics ``dq/dt = 1/2 q (x) [0, w_nb^b]`` ([DE] quaternion eq.)."""
+    """Quaternion kinematics ``dq/dt = 1/2 q (x) [0, w_nb^b]`` ([DE] lists it beside the DCM and Euler forms; [LAI12] eq. 3)."""
     p = np.empty(4)
     p[0] = 0.0
     p[1] = w_nb_b[0]

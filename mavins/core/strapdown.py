@@ -226,8 +226,8 @@ def body_update_quat(sigma: np.ndarray, order: int) -> np.ndarray:
 
     ``r = [a_c, a_s sigma]`` with ``(a_c, a_s)`` = (1, 1/2), (1 - s^2/8, 1/2),
     (1 - s^2/8, 1/2 - s^2/48), (1 - s^2/8 + s^4/384, 1/2 - s^2/48) for orders
-    1..4 and the exact ``(cos s/2, sin(s/2)/s)`` for order 0 ([TW11] slide
-    "11.2.1 quaternion algorithm"; CONVENTIONS.md ``--order``).
+    1..4 and the exact ``(cos s/2, sin(s/2)/s)`` for order 0 ([TW11] 11.2.1
+    quaternion error analysis and table 11.2; CONVENTIONS.md ``--order``).
     """
     if order == 0:
         return rotvec_to_quat(sigma)
