@@ -477,7 +477,11 @@ def _cmd_key(args: argparse.Namespace) -> int:
     if args.file.exists() and not args.force:
         print(f"mavins key: error: {args.file} exists (use --force to overwrite)", file=sys.stderr)
         return EXIT_USAGE
-    key = key_from_passphrase(args.passphrase) if args.passphrase else secrets.token_bytes(32)
+    try:
+        key = key_from_passphrase(args.passphrase) if args.passphrase else secrets.token_bytes(32)
+    except UnicodeEncodeError:
+        print("mavins key: error: the passphrase must be ASCII (MAVProxy hashes its ASCII bytes)", file=sys.stderr)
+        return EXIT_USAGE
     fd = os.open(args.file, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
     with os.fdopen(fd, "w") as fh:
         fh.write(key.hex() + "\n")

@@ -27,6 +27,8 @@ class State(str, Enum):
 
 
 HEADING_WORDS = ("auto", "gyrocompass", "mag", "vehicle")
+MAX_HEIGHT = 1.0e6  # m: beyond this (either sign) the solution has diverged
+MAX_SPEED = 1.0e4  # m/s: likewise
 
 
 @dataclass
@@ -247,6 +249,13 @@ class Engine:
         if not self._output_due(float(s[sd.S_T])):  # type: ignore[index]
             return None
         sd.solution_row(s, self._kcfg, self._row)  # type: ignore[arg-type]
+        r = self._row
+        if not np.all(np.isfinite(r)) or abs(r[3]) > MAX_HEIGHT or abs(r[4]) + abs(r[5]) + abs(r[6]) > MAX_SPEED:
+            # e.g. hours of extreme input: never publish it, start over
+            self.counters["diverged"] += 1
+            self._event("ERROR", "solution diverged (non-finite or beyond any vehicle): re-aligning")
+            self.restart("solution diverged")
+            return None
         return Output(self._row.copy(), np.array(self._gyro_last), self._pos, self.degraded)  # type: ignore[arg-type]
 
     def _output_due(self, t: float) -> bool:

@@ -64,8 +64,11 @@ class Ingest:
     locked_id: int | None = None
     locked_system: int | None = None
 
+    last_reason: str | None = None  # why the last message was rejected (None if accepted)
+
     def reject(self, reason: str) -> None:
         self.rejected[reason] += 1
+        self.last_reason = reason
 
     def reset_time(self) -> None:
         """Forget the last timestamp (after an autopilot restart)."""
@@ -76,6 +79,7 @@ class Ingest:
         name = msg.get_type()  # type: ignore[attr-defined]
         if name not in IMU_MESSAGES:
             return None
+        self.last_reason = None
         cfg = self.cfg
         src_sys = msg.get_srcSystem()  # type: ignore[attr-defined]
         if cfg.target_system is not None and src_sys != cfg.target_system:

@@ -24,8 +24,11 @@ from .mavlink import mavlink, mavutil
 
 RCVBUF_BYTES = 8 * 1024 * 1024
 MAX_DATAGRAM = 65535
-# Kernel receive timestamps (Linux: SO_TIMESTAMP = SCM_TIMESTAMP = 29, a struct timeval).
-SO_TIMESTAMP = getattr(socket, "SO_TIMESTAMP", 29 if sys.platform.startswith("linux") else None)
+# Kernel receive timestamps (Linux: SO_TIMESTAMP = SCM_TIMESTAMP = 29, a struct timeval) and the
+# kernel's count of datagrams dropped for a full receive buffer (Linux: SO_RXQ_OVFL = 40, a uint32).
+_LINUX = sys.platform.startswith("linux")
+SO_TIMESTAMP = getattr(socket, "SO_TIMESTAMP", 29 if _LINUX else None)
+SO_RXQ_OVFL = getattr(socket, "SO_RXQ_OVFL", 40 if _LINUX else None)
 
 
 class LinkError(OSError):
@@ -41,7 +44,8 @@ class Link(Protocol):
 
     def fileno(self) -> int | None: ...
     def receive(self, max_datagrams: int) -> tuple[list[tuple[mavlink.MAVLink_message, object]], int]: ...
-    def discard(self, limit: int) -> int: ...
+    @property
+    def dropped(self) -> int: ...
     def authorize(self, addr: object) -> None: ...
     def send(self, buf: bytes) -> None: ...
     def close(self) -> None: ...
@@ -49,10 +53,11 @@ class Link(Protocol):
 
 @dataclass
 class PeerPolicy:
-    """Who gets output on a listening link."""
+    """Who gets output on a listening link, and how long input may wait."""
 
     timeout: float = 10.0  # s of silence after which a peer stops receiving
     max_peers: int = 8
+    max_lag: float = 0.25  # s: a datagram that waited longer in the kernel is dropped unread
 
 
 def _parser() -> mavlink.MAVLink:
@@ -89,10 +94,18 @@ class UdpLink:
         host, port = _host_port(url, scheme)
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RCVBUF_BYTES)
-        if SO_TIMESTAMP is not None:
-            self.sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMP, 1)
+        for opt in (SO_TIMESTAMP, SO_RXQ_OVFL):
+            if opt is not None:
+                try:
+                    self.sock.setsockopt(socket.SOL_SOCKET, opt, 1)
+                except OSError:
+                    pass
         self.sock.setblocking(False)
         self.age = 0.0  # s the last datagram read had waited in the kernel
+        self.dropped_late = 0  # datagrams dropped unread: waited over max_lag, or thinned under overload
+        self.kernel_dropped = 0  # datagrams the kernel dropped for a full buffer
+        self.thin = 1  # under overload only every thin-th datagram is parsed
+        self._seen = 0
         self.fixed: tuple[str, int] | None = None
         try:
             if self.listen:
@@ -111,9 +124,18 @@ class UdpLink:
         return self.sock.fileno()
 
     def receive(self, max_datagrams: int) -> tuple[list[tuple[mavlink.MAVLink_message, object]], int]:
-        """Messages of up to ``max_datagrams`` waiting datagrams, and how many were read."""
+        """Messages of up to ``max_datagrams`` waiting datagrams, and how many were read.
+
+        A datagram that waited in the kernel longer than ``max_lag`` is dropped
+        unread, and while the kernel itself drops datagrams (input beyond
+        capacity) only every ``thin``-th one is parsed: what is processed stays
+        current and evenly spread in sensor time, so the output keeps its rate.
+        """
         out: list[tuple[mavlink.MAVLink_message, object]] = []
         n = 0
+        now = time.time()
+        max_lag = self.policy.max_lag
+        kernel_before = self.kernel_dropped
         while n < max_datagrams:
             try:
                 data, anc, _, addr = self.sock.recvmsg(MAX_DATAGRAM, 64)
@@ -123,9 +145,20 @@ class UdpLink:
                 break  # e.g. ICMP port unreachable reported on a connected-less socket
             n += 1
             for level, kind, value in anc:
-                if level == socket.SOL_SOCKET and kind == SO_TIMESTAMP and len(value) >= 16:
+                if level != socket.SOL_SOCKET:
+                    continue
+                if kind == SO_TIMESTAMP and len(value) >= 16:
                     sec, usec = struct.unpack("qq", value[:16])
-                    self.age = time.time() - (sec + usec * 1e-6)
+                    self.age = now - (sec + usec * 1e-6)
+                elif kind == SO_RXQ_OVFL and len(value) >= 4:
+                    self.kernel_dropped = struct.unpack("I", value[:4])[0]
+            if self.age > max_lag:
+                self.dropped_late += 1
+                continue
+            self._seen += 1
+            if self.thin > 1 and self._seen % self.thin:
+                self.dropped_late += 1
+                continue
             msgs = self.parser.parse_buffer(data) or []
             out.extend((m, addr) for m in msgs)
             if self.parser.buf_len() > 0 or not msgs:
@@ -133,18 +166,21 @@ class UdpLink:
                 reason = "truncated frame" if msgs or self.parser.buf_len() > 0 else "no frame in datagram"
                 out.append((mavlink.MAVLink_bad_data(bytearray(data[:64]), reason), addr))
                 _reset(self.parser)
+        self._adapt_thinning(kernel_before, n, max_datagrams)
         return out, n
 
-    def discard(self, limit: int) -> int:
-        """Read and drop waiting datagrams (flood relief); returns how many."""
-        n = 0
-        while n < limit:
-            try:
-                self.sock.recvfrom(MAX_DATAGRAM)
-            except (BlockingIOError, InterruptedError, OSError):
-                break
-            n += 1
-        return n
+    def _adapt_thinning(self, kernel_before: int, n: int, max_datagrams: int) -> None:
+        """Thin uniformly while the kernel is dropping (true overload), so the datagrams that are
+        processed stay evenly spread in time instead of the clusters a full buffer lets through."""
+        if self.kernel_dropped > kernel_before:
+            self.thin = min(self.thin * 2, 1024)
+        elif n < max_datagrams and self.thin > 1:
+            self.thin //= 2
+
+    @property
+    def dropped(self) -> int:
+        """Input lost for lack of capacity: shed late by us plus dropped by the kernel."""
+        return self.dropped_late + self.kernel_dropped
 
     def authorize(self, addr: object) -> None:
         """Let ``addr`` receive output (it sent a valid or authenticated frame)."""
@@ -188,6 +224,7 @@ class MavutilLink:
             raise LinkError(f"{url}: {exc}") from None
         self.parser = _parser()
         self.age = 0.0
+        self.dropped = 0
 
     def fileno(self) -> int | None:
         fd = getattr(self.conn, "fd", None)
@@ -202,9 +239,6 @@ class MavutilLink:
             return [], 0
         msgs = self.parser.parse_buffer(bytes(data)) or []
         return [(m, None) for m in msgs], 1
-
-    def discard(self, limit: int) -> int:
-        return 0
 
     def authorize(self, addr: object) -> None:
         return None

@@ -70,7 +70,7 @@ class Pipeline:
         if smp is None:
             t_new = _msg_time(msg)
             if last is not None and t_new is not None and t_new < last - RESTART_JUMP and \
-                    self.ingest.rejected["time_backwards"] > 0:
+                    self.ingest.last_reason == "time_backwards":
                 # the autopilot restarted (its clock went back): start over
                 self.ingest.reset_time()
                 self.engine.restart(f"sensor time went back from {last:.3f} to {t_new:.3f} s")

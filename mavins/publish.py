@@ -60,8 +60,8 @@ def encode(mav: mavlink.MAVLink, out: Output, cfg: PublishConfig, reset_counter:
             ms,
             int(round(math.degrees(lat) * 1e7)),
             int(round(math.degrees(lon) * 1e7)),
-            int(round((h - cfg.geoid_height) * 1000)),
-            int(round((h - out.origin[2]) * 1000)),
+            _i32((h - cfg.geoid_height) * 1000),
+            _i32((h - out.origin[2]) * 1000),
             _cms(vn),
             _cms(ve),
             _cms(vd),
@@ -93,6 +93,11 @@ def encode(mav: mavlink.MAVLink, out: Output, cfg: PublishConfig, reset_counter:
 def _cms(v: float) -> int:
     """m/s to int16 cm/s, saturated."""
     return max(-32768, min(32767, int(round(v * 100))))
+
+
+def _i32(v: float) -> int:
+    """A value for an int32 field, saturated."""
+    return max(-(2**31), min(2**31 - 1, int(round(v))))
 
 
 def heartbeat(mav: mavlink.MAVLink, navigating: bool) -> mavlink.MAVLink_message:
