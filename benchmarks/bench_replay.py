@@ -425,11 +425,6 @@ def main(argv: Sequence[str] = ()) -> list[dict]:
 
 
 if __name__ == "__main__":
-    from run_all import format_table, machine_info
+    from run_all import print_report
 
-    table_rows = main(sys.argv[1:])
-    print("\n".join(machine_info()))
-    print()
-    print(format_table(table_rows))
-    for line in NOTES:
-        print(line)
+    print_report(main(sys.argv[1:]), NOTES)

@@ -121,6 +121,15 @@ def machine_info() -> list[str]:
     ]
 
 
+def print_report(rows: list[dict], notes: list[str]) -> None:
+    """What a benchmark script prints when run on its own: machine, table, notes."""
+    print("\n".join(machine_info()))
+    print()
+    print(format_table(rows))
+    for line in notes:
+        print(line)
+
+
 def format_table(rows: Iterable[dict]) -> str:
     """Plain-text table of the rows; absent or None cells print as ``-``; all-empty columns are left out."""
     rows = list(rows)
