@@ -11,6 +11,7 @@ from __future__ import annotations
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
+from collections.abc import Collection, Iterator
 from typing import Any
 
 from . import SCENARIO_DIR as BUILTIN_DIR
@@ -124,6 +125,19 @@ def _keys(src: str, where: str, table: object, required: set[str], optional: set
     return table
 
 
+def _tables(s: Scenario, name: str, kinds: Collection[str]) -> Iterator[tuple[str, str, dict[str, Any]]]:
+    """``(where, kind, table)`` for each table of an array such as ``[[segments]]``, kinds checked."""
+    items = s.doc.get(name, [])
+    if not isinstance(items, list):
+        raise ScenarioError(f"{s.source}: {name}: expected an array of tables ([[{name}]])")
+    for i, table in enumerate(items):
+        where = f"{name}[{i}]"
+        kind = table.get("kind") if isinstance(table, dict) else None
+        if kind not in kinds:
+            raise ScenarioError(f"{s.source}: {where}: kind {kind!r} is not one of {', '.join(sorted(kinds))}")
+        yield where, kind, table
+
+
 def build(s: Scenario) -> Trajectory:
     """Build the trajectory a scenario describes (raises ScenarioError on bad keys or values)."""
     src = s.source
@@ -143,14 +157,7 @@ def build(s: Scenario) -> Trajectory:
         )
     except _FAILURES as exc:
         raise ScenarioError(f"{src}: [start]: {exc}") from None
-    segments = s.doc.get("segments", [])
-    if not isinstance(segments, list):
-        raise ScenarioError(f"{src}: segments: expected an array of tables ([[segments]])")
-    for i, seg in enumerate(segments):
-        where = f"segments[{i}]"
-        kind = seg.get("kind") if isinstance(seg, dict) else None
-        if kind not in _SEGMENTS:
-            raise ScenarioError(f"{src}: {where}: kind {kind!r} is not one of {', '.join(sorted(_SEGMENTS))}")
+    for where, kind, seg in _tables(s, "segments", _SEGMENTS):
         _keys(src, where, seg, set(_SEGMENTS[kind]), set(_OPTIONAL.get(kind, ())))
         args = {k: v for k, v in seg.items() if k != "kind"}
         try:
@@ -162,14 +169,7 @@ def build(s: Scenario) -> Trajectory:
                 getattr(traj, kind)(**args)
         except _FAILURES as exc:
             raise ScenarioError(f"{src}: {where}: {exc}") from None
-    perturbations = s.doc.get("perturbations", [])
-    if not isinstance(perturbations, list):
-        raise ScenarioError(f"{src}: perturbations: expected an array of tables ([[perturbations]])")
-    for i, p in enumerate(perturbations):
-        where = f"perturbations[{i}]"
-        kind = p.get("kind") if isinstance(p, dict) else None
-        if kind not in _PERTURBATIONS:
-            raise ScenarioError(f"{src}: {where}: kind {kind!r} is not one of {', '.join(sorted(_PERTURBATIONS))}")
+    for where, kind, p in _tables(s, "perturbations", _PERTURBATIONS):
         _keys(src, where, p, *_PERTURBATIONS[kind])
         try:
             if kind == "coning":
