@@ -33,6 +33,7 @@ class Pipeline:
     counters: Counter = field(default_factory=Counter)
     last_sample: ImuSample | None = None
     recorder: object | None = None
+    _outputs: int = 0
 
     def __post_init__(self) -> None:
         self.engine = Engine(self.engine_cfg)
@@ -87,10 +88,12 @@ class Pipeline:
 
                 r = out.row
                 rec.on_output(r, out.origin, local_ned(float(r[1]), float(r[2]), float(r[3]), out.origin))  # type: ignore[attr-defined]
-                rejected = self.ingest.rejected
-                if rejected and self.engine.counters["outputs_since_health"] % 50 == 0:
-                    rec.on_counters(float(r[0]), dict(rejected))  # type: ignore[attr-defined]
-                self.engine.counters["outputs_since_health"] += 1
+                self._outputs += 1
+                if self._outputs % 50 == 1:
+                    counts = {f"rejected_{k}": v for k, v in self.ingest.rejected.items()}
+                    counts.update({k: v for k, v in self.engine.counters.items() if v})
+                    if counts:
+                        rec.on_counters(float(r[0]), counts)  # type: ignore[attr-defined]
         return out
 
     def take_events(self) -> list[tuple[str, str]]:

@@ -11,8 +11,10 @@ Layout (entity paths, units in the series names):
 * ``/imu/gyro`` (rad/s) and ``/imu/accel`` (m/s^2), every sample.
 * ``/errors/attitude`` (deg), ``/errors/position`` (m), ``/errors/velocity``
   (m/s): only where truth exists at the output's sensor time.
-* ``/health/*``: sample interval (ms), rejected samples by reason, state,
-  output rate (Hz); ``/log`` text log of state changes and warnings.
+* ``/health/*``: sample interval (ms), output rate (Hz), processing latency
+  (ms, live runs), ``/health/counts/*`` (rejected samples by reason, bridged
+  and long gaps, restarts); ``/log`` text log of state changes, alignment
+  result and warnings.
 
 Timelines: ``sensor_time`` (duration) everywhere; ``wall_time`` on live runs.
 Rows are buffered and sent with ``send_columns`` (columnar) every
@@ -95,6 +97,8 @@ def blueprint():  # type: ignore[no-untyped-def]
                 series("/imu/accel", "Accel (m/s^2)"),
                 series("/health/sample_interval", "Sample interval (ms)"),
                 series("/health/output_rate", "Output rate (Hz)"),
+                series("/health/latency", "Processing latency (ms)"),
+                series("/health/counts", "Counts: rejected, gaps, restarts"),
             ),
             column_shares=[4, 3, 2],
         ),
@@ -157,6 +161,7 @@ class Recorder:
             "/imu/accel": (["accel x", "accel y", "accel z"], XYZ),
             "/health/sample_interval": (["sample interval (ms)"], [[150, 150, 150]]),
             "/health/output_rate": (["output rate (Hz)"], [[100, 200, 200]]),
+            "/health/latency": (["processing latency (ms)"], [[220, 120, 220]]),
         }
         for path, (names, colors) in series.items():
             self.rec.log(path, rr.SeriesLines(names=names, colors=colors), static=True)
@@ -266,9 +271,13 @@ class Recorder:
         self.rec.log("/log", rr.TextLog(text, level=lvl))
 
     def on_counters(self, t: float, counters: dict[str, int]) -> None:
-        """Rejected-sample counts by reason (one scalar entity per reason)."""
-        for reason, n in counters.items():
-            self._push(f"/health/rejected/{reason}", t, [float(n)])
+        """Counts so far: rejected samples by reason, bridged and long gaps, restarts (one entity each)."""
+        for name, n in counters.items():
+            self._push(f"/health/counts/{name}", t, [float(n)])
+
+    def on_latency(self, t: float, ms: float) -> None:
+        """Processing latency of an output set (ms): kernel arrival of its input to the set sent."""
+        self._push("/health/latency", t, [ms])
 
     # -- output ------------------------------------------------------------------
     def _flush(self, path: str) -> None:

@@ -101,6 +101,8 @@ class Service:
         self._last_request = 0.0
         self._cpu0 = (time.process_time(), time.monotonic())
         self._text_id = 0
+        self._batch_time = 0.0
+        self._batch_age = 0.0
         self._pending_text: list[tuple[str, str]] = []
 
     # -- optional parts ----------------------------------------------------------
@@ -200,6 +202,15 @@ class Service:
         if out is not None:
             self._send(publish.encode(self.mav, out, self.cfg.publish, self.pipeline.engine.counters["restarts"]))
             self.summary.outputs += 1
+            rec = self.pipeline.recorder
+            if rec is not None:
+                # from the datagrams' arrival in the kernel to this output set sent
+                latency = time.time() - self._batch_time + self._batch_age
+                try:
+                    rec.on_latency(float(out.row[0]), 1e3 * latency)  # type: ignore[attr-defined]
+                except Exception as exc:
+                    self.pipeline.recorder = None
+                    self._optional_failed("recording", exc)
             if self._solution is not None:
                 self._solution.write(out.row)
 
@@ -249,7 +260,9 @@ class Service:
         gc.freeze()
         try:
             while not stop.is_set():
+                self._batch_time = time.time()
                 batch, _ = self.master.receive(BATCH)
+                self._batch_age = self.master.age
                 if not batch:
                     self._periodic()
                     if fd is not None:
@@ -288,7 +301,7 @@ class Service:
         c["flood_dropped"] = self._flood_dropped()
         c.update(self.pipeline.counters)
         c.update({f"rejected_{k}": v for k, v in self.pipeline.ingest.rejected.items()})
-        c.update({k: v for k, v in self.pipeline.engine.counters.items() if k != "outputs_since_health"})
+        c.update(self.pipeline.engine.counters)
         c["imu_accepted"] = self.pipeline.ingest.accepted
         self.summary.counters = c
         self.summary.state = self.pipeline.engine.state.value
