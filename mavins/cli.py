@@ -483,9 +483,9 @@ def _cmd_key(args: argparse.Namespace) -> int:
         print("mavins key: error: the passphrase must be ASCII (MAVProxy hashes its ASCII bytes)", file=sys.stderr)
         return EXIT_USAGE
     fd = os.open(args.file, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    os.fchmod(fd, 0o600)  # an existing file keeps its old mode through O_TRUNC: close it before writing
     with os.fdopen(fd, "w") as fh:
         fh.write(key.hex() + "\n")
-    os.chmod(args.file, 0o600)
     print(f"mavins key: wrote {args.file} (mode 600)", file=sys.stderr)
     return 0
 
