@@ -87,7 +87,7 @@ def build_sim_tlog(path: Path, seconds: float, rate: float) -> dict:
     from sim.scenarios import load
     from sim.stream import StreamOptions, frames
 
-    from mavins.mavlink import mavlink
+    from mavins.link.mavlink import mavlink
 
     run = generate(load("static"), duration=seconds, rate=rate, grade="ideal")
     truth = run.exact.truth[-1]

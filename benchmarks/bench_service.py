@@ -131,7 +131,7 @@ def highres_frames(
     the CRC are then written for every row with numpy. The first rows are
     checked byte for byte against pymavlink's own encoding.
     """
-    from mavins.mavlink import mavlink
+    from mavins.link.mavlink import mavlink
 
     usec = np.round(t0_usec + np.arange(n) * (1e6 / rate)).astype(np.uint64)
     mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
@@ -499,7 +499,7 @@ def find_max_rate(start: float, seconds: float, workdir: Path, cap: float, tol: 
 
 def parse_ceiling(n: int = 200_000) -> float:
     """Frames/s pymavlink parses, one ``parse_buffer`` call per frame (in process, best of 3)."""
-    from mavins.mavlink import mavlink
+    from mavins.link.mavlink import mavlink
 
     gyro, accel = static_imu()
     frames, _ = highres_frames(n, 1000.0, gyro, accel)

@@ -22,8 +22,8 @@ import numpy as np
 
 from .core import earth
 from .engine import EngineConfig
-from .ingest import IngestConfig
-from .mavlink import mavutil
+from .link.ingest import IngestConfig
+from .link.mavlink import mavutil
 from .service import Service, ServiceConfig, Summary
 
 log = logging.getLogger("mavins")
@@ -141,7 +141,7 @@ def run_demo(
     engine_cfg = EngineConfig(lat=init.lat, lon=init.lon, alt=init.h, heading=heading, align=5.0)
     recorder = None
     if rerun_path is not None or rerun_serve:
-        from .record import Recorder
+        from .record.recorder import Recorder
 
         recorder = Recorder(rerun_path, serve=rerun_serve, app="mavins-demo")
         if recorder.url:

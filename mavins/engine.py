@@ -17,7 +17,8 @@ import numpy as np
 
 from .core import align, earth
 from .core import strapdown as sd
-from .ingest import ImuSample
+from .core.records import ImuSample, Solution
+from .core.rotation import euler_to_dcm
 
 
 class State(str, Enum):
@@ -53,16 +54,6 @@ class EngineConfig:
     max_gap: float = 1.0  # s: a longer gap in sensor time is not integrated; the solution is degraded
     restart_gap: float = 60.0  # s: a longer jump forward (e.g. boot time -> UNIX time) restarts alignment
     gyro_bias: str = "estimate"  # "estimate": mean gyro minus Earth rate over the static window; "none"
-
-
-@dataclass
-class Output:
-    """One output set: the solution row (radians, CONVENTIONS.md columns) and the latest body rate."""
-
-    row: np.ndarray
-    gyro: np.ndarray
-    origin: tuple[float, float, float]
-    degraded: bool
 
 
 @dataclass
@@ -130,7 +121,7 @@ class Engine:
         self.counters["restarts"] += 1
         self._set_state(State.WAITING if self._pos is None else State.ALIGNING, reason)
 
-    def on_imu(self, smp: ImuSample) -> Output | None:
+    def on_imu(self, smp: ImuSample) -> Solution | None:
         """Feed one accepted sample; returns an output set when one is due.
 
         Gaps in sensor time: up to ``max_gap`` they are bridged (counted when
@@ -170,11 +161,8 @@ class Engine:
 
     def _skip_gap(self, t_resume: float) -> None:
         """Move the kernel's clock to ``t_resume`` without integrating the gap."""
-        s = self._s
-        if s is None:
-            return
-        s[sd.S_TJ] = max(s[sd.S_TJ], t_resume)
-        s[sd.S_HAVEP] = 0.0  # sampled rates: the next sample opens a fresh interval
+        if self._s is not None:
+            sd.skip_to(self._s, t_resume)
 
     def _align_step(self, smp: ImuSample) -> None:
         g = np.asarray(smp.gyro)
@@ -208,7 +196,7 @@ class Engine:
         self._bias = (0.0, 0.0, 0.0)
         if self.cfg.gyro_bias == "estimate" and source != "gyrocompass":
             # at rest the gyros read C_n^b w_ie^n; the rest is bias (zero-rate calibration)
-            c_bn = sd.euler_to_dcm(roll, pitch, yaw)
+            c_bn = euler_to_dcm(roll, pitch, yaw)
             self.gyro_bias = w_mean - c_bn.T @ earth.earth_rate_n(math.radians(lat))
         self._set_state(
             State.NAVIGATING,
@@ -238,7 +226,7 @@ class Engine:
             self._event("WARNING", "no magnetometer data: heading from gyrocompass")
         return align.gyrocompass(w_mean, roll, pitch), "gyrocompass"
 
-    def _nav_step(self, smp: ImuSample) -> Output | None:
+    def _nav_step(self, smp: ImuSample) -> Solution | None:
         g, f, b = smp.gyro, smp.accel, self._bias
         gx, gy, gz = g[0] - b[0], g[1] - b[1], g[2] - b[2]
         self._gyro_last = (gx, gy, gz)
@@ -246,7 +234,7 @@ class Engine:
         r = sd.push_rate_scalars(s, self._kcfg, smp.t, gx, gy, gz, f[0], f[1], f[2])  # type: ignore[arg-type]
         if r != 1:
             return None
-        if not self._output_due(float(s[sd.S_T])):  # type: ignore[index]
+        if not self._output_due(sd.state_time(s)):  # type: ignore[arg-type]
             return None
         sd.solution_row(s, self._kcfg, self._row)  # type: ignore[arg-type]
         r = self._row
@@ -256,7 +244,7 @@ class Engine:
             self._event("ERROR", "solution diverged (non-finite or beyond any vehicle): re-aligning")
             self.restart("solution diverged")
             return None
-        return Output(self._row.copy(), np.array(self._gyro_last), self._pos, self.degraded)  # type: ignore[arg-type]
+        return Solution(self._row.copy(), np.array(self._gyro_last), self._pos, self.degraded)  # type: ignore[arg-type]
 
     def _output_due(self, t: float) -> bool:
         """One output set each time sensor time crosses a multiple of 1/rate (CONVENTIONS.md
@@ -280,21 +268,3 @@ class Engine:
     def take_events(self) -> list[tuple[str, str]]:
         ev, self.events = self.events, []
         return ev
-
-
-def warm_up() -> None:
-    """Load (or compile, the first time on a machine) every kernel the engine calls.
-
-    Called before a live service reads its link, so the first samples are not
-    held up by compilation.
-    """
-    s = sd.init_state(0.0, 0.8, 0.1, 100.0, np.zeros(3), 0.0, 0.0, 0.0)
-    for rates in ("averaged", "sampled"):
-        cfg = sd.make_config(imu_rates=rates)
-        for i in range(1, 5):
-            sd.push_rate(s, cfg, 0.01 * i, np.zeros(3), np.array([0.0, 0.0, -9.8]))
-            sd.push_rate_scalars(s, cfg, 0.01 * i + 0.005, 0.0, 0.0, 0.0, 0.0, 0.0, -9.8)
-    sd.solution_row(s, cfg, np.zeros(sd.OUT_SIZE))
-    sd.euler_to_dcm(0.0, 0.0, 0.0)
-    earth.earth_rate_n(0.8)
-    earth.gravity(0.8, 100.0)

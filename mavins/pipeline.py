@@ -13,8 +13,10 @@ import math
 from collections import Counter
 from dataclasses import dataclass, field
 
-from .engine import Engine, EngineConfig, Output
-from .ingest import IMU_MESSAGES, Ingest, IngestConfig, ImuSample
+from .core.frames import local_ned
+from .core.records import ImuSample, Solution
+from .engine import Engine, EngineConfig
+from .link.ingest import IMU_MESSAGES, Ingest, IngestConfig
 
 log = logging.getLogger("mavins")
 
@@ -43,7 +45,7 @@ class Pipeline:
     def vehicle_sysid(self) -> int | None:
         return self.ingest.locked_system
 
-    def handle(self, msg: object) -> Output | None:
+    def handle(self, msg: object) -> Solution | None:
         """Process one message; returns an output set when one is due."""
         name = msg.get_type()  # type: ignore[attr-defined]
         if name == "BAD_DATA":
@@ -65,7 +67,7 @@ class Pipeline:
             self.engine.set_vehicle_yaw(float(msg.yaw))  # type: ignore[attr-defined]
         return None
 
-    def _imu(self, msg: object) -> Output | None:
+    def _imu(self, msg: object) -> Solution | None:
         last = self.ingest.last_t
         smp = self.ingest.sample(msg)
         if smp is None:
@@ -84,8 +86,6 @@ class Pipeline:
         if rec is not None:
             rec.on_sample(smp.t, smp.gyro, smp.accel)  # type: ignore[attr-defined]
             if out is not None:
-                from .publish import local_ned
-
                 r = out.row
                 rec.on_output(r, out.origin, local_ned(float(r[1]), float(r[2]), float(r[3]), out.origin))  # type: ignore[attr-defined]
                 self._outputs += 1

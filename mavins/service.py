@@ -1,6 +1,6 @@
 """``mavins run``: the live MAVLink INS service (link in -> pipeline -> publish).
 
-Reads a link (UDP handled by mavins.link; other pymavlink connection strings
+Reads a link (UDP handled by mavins.link.links; other pymavlink connection strings
 through pymavlink), feeds every message through the shared pipeline,
 publishes output sets to the master link's authorised peers and every
 ``--out`` link, keeps an input tlog, and stops cleanly on request.
@@ -13,6 +13,7 @@ output links, tlog) are logged and switch that part off, never navigation.
 
 from __future__ import annotations
 
+import dataclasses
 import gc
 import logging
 import select
@@ -23,19 +24,21 @@ from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from . import publish
-from .engine import EngineConfig, State, warm_up
+from .core import jit
+from .engine import EngineConfig, State
 from .files import SolutionWriter
-from .ingest import IMU_MESSAGES, IngestConfig
-from .link import Link, PeerPolicy, open_link
-from .mavlink import mavlink
+from .link import publish
+from .link.ingest import IMU_MESSAGES, IngestConfig
+from .link.links import Link, PeerPolicy, open_link
+from .link.mavlink import mavlink
 from .pipeline import Pipeline
-from .signing import Signer, Verifier
+from .link.signing import Signer, Verifier
 
 log = logging.getLogger("mavins")
 
 BATCH = 256  # datagrams read per loop turn
 SYS_STATUS_PERIOD = 1.0  # s
+DRAIN_S = 2.0  # s: on a stop, input already in the socket is processed for at most this long
 
 
 @dataclass
@@ -71,12 +74,44 @@ class Summary:
         return out
 
 
+def warm_up(engine_cfg: EngineConfig, pub: publish.PublishConfig) -> float:
+    """Load (or compile, the first time on a machine) every kernel the live path calls.
+
+    Runs a synthetic static stream through a throw-away pipeline with the
+    run's own settings, from alignment into navigation and publishing, so no
+    kernel is compiled while real input waits in the socket. Returns the
+    seconds it took; the first time it says so once on the log.
+    """
+    t0 = time.monotonic()
+    cold = not jit.cache_is_warm()
+    if cold:
+        log.warning("first start of this version on this machine: compiling the navigation kernels "
+                    "(once; later starts load them from %s)", jit.numba.config.CACHE_DIR)
+    cfg = dataclasses.replace(engine_cfg, lat=45.0, lon=7.0, alt=100.0, heading=0.0, align=0.05,
+                              rate=max(engine_cfg.rate, 1.0))
+    pipe = Pipeline(cfg, IngestConfig(message="HIGHRES_IMU"), own_component=-1)
+    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    out = None
+    for i in range(1, 60):
+        msg = mavlink.MAVLink_highres_imu_message(10_000 * i, 0.0, 0.0, -9.80, 0.0, 0.0, 0.0, 0.2, 0.0, 0.4,
+                                                  0.0, 0.0, 0.0, 0.0, 0b111111111, 0)
+        msg.pack(mav)
+        out = pipe.handle(msg) or out
+    if out is None:
+        raise RuntimeError("warm-up produced no solution")  # the engine itself is broken
+    publish.encode(mav, out, pub, 0)
+    took = time.monotonic() - t0
+    if cold:
+        log.warning("navigation kernels compiled in %.1f s", took)
+    return took
+
+
 class Service:
     """The live loop. ``run(stop)`` returns when ``stop`` is set."""
 
     def __init__(self, engine_cfg: EngineConfig, ingest_cfg: IngestConfig, cfg: ServiceConfig) -> None:
         self.cfg = cfg
-        warm_up()
+        warm_up(engine_cfg, cfg.publish)
         self.pipeline = Pipeline(engine_cfg, ingest_cfg, own_component=cfg.compid)
         self.summary = Summary()
         self.counters: Counter = Counter()
@@ -231,8 +266,21 @@ class Service:
             log.info("asked for HIGHRES_IMU at %.0f Hz", self.cfg.request_imu)
 
     def _flood_dropped(self) -> int:
-        """Input lost for lack of capacity (shed late or dropped by the kernel), on every link read."""
+        """Input not processed for lack of capacity (skipped by us or dropped by the kernel)."""
         return int(self.master.dropped)
+
+    def _log_skipped(self) -> None:
+        """Datagrams read but skipped under overload still go into the input tlog."""
+        skipped = self.master.take_skipped()
+        if not skipped or self._tlog is None:
+            return
+        stamp = struct.pack(">Q", int(time.time() * 1e6))
+        try:
+            for data in skipped:
+                self._tlog.write(stamp + data)
+        except OSError as exc:
+            self._tlog = None
+            self._optional_failed("tlog", exc)
 
     def _sys_status(self, now: float) -> mavlink.MAVLink_message:
         """SYS_STATUS: IMU sensor health, load, and rejection/drop counters."""
@@ -247,9 +295,10 @@ class Service:
         total = self.summary.messages + dropped
         drop_rate = int(10000 * dropped / total) if total else 0
         return self.mav.sys_status_encode(sensors, sensors, healthy, load, 0, -1, -1, min(drop_rate, 10000),
-                                          min(rejected, 65535), min(dropped, 65535),
+                                          min(rejected, 65535), min(int(self.master.dropped_late), 65535),
                                           min(self.pipeline.engine.counters["gaps_long"], 65535),
-                                          min(self.pipeline.engine.counters["restarts"], 65535), 0)
+                                          min(self.pipeline.engine.counters["restarts"], 65535),
+                                          min(int(self.master.kernel_dropped), 65535))
 
     def run(self, stop: threading.Event) -> Summary:
         """Serve until ``stop`` is set; flush the side outputs and return the summary."""
@@ -270,15 +319,29 @@ class Service:
                     else:
                         time.sleep(0.002)
                     continue
+                self._log_skipped()
                 for msg, addr in batch:
                     self._handle(msg, addr)
                 self._periodic()
+            self._drain()
         finally:
             self.close()
         return self.summary
 
+    def _drain(self) -> None:
+        """On a stop, process what already arrived (bounded by ``DRAIN_S`` of wall time)."""
+        t_end = time.monotonic() + DRAIN_S
+        while time.monotonic() < t_end:
+            batch, n = self.master.receive(BATCH)
+            if not n:
+                return
+            self._log_skipped()
+            for msg, addr in batch:
+                self._handle(msg, addr)
+
     def close(self) -> None:
         """Flush and close the tlog, the solution file, the recording and the links."""
+        self._log_skipped()
         if self._tlog is not None:
             self._tlog.close()
             self._tlog = None
@@ -299,6 +362,8 @@ class Service:
             self.pipeline.recorder = None
         c = dict(self.counters)
         c["flood_dropped"] = self._flood_dropped()
+        c["flood_skipped"] = int(self.master.dropped_late)  # received and logged, not navigated
+        c["kernel_dropped"] = int(self.master.kernel_dropped)  # never received
         c.update(self.pipeline.counters)
         c.update({f"rejected_{k}": v for k, v in self.pipeline.ingest.rejected.items()})
         c.update(self.pipeline.engine.counters)

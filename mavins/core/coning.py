@@ -23,7 +23,6 @@ from __future__ import annotations
 import numpy as np
 
 from .jit import kernel
-from .rotation import cross
 
 #: ``CONING_COEFFS[N, :N-1]`` are the N-sample coefficients, oldest sample first
 #: (CONVENTIONS.md ``--samples``). Row 1 (and row 0) are unused.
@@ -42,49 +41,55 @@ CONING_COEFFS[6, :5] = [
 MAX_SAMPLES = 6
 
 
+Vec3 = tuple[float, float, float]
+
+
 @kernel
-def nsample_coning(dtheta: np.ndarray, n: int) -> np.ndarray:
+def nsample_coning(buf: np.ndarray, off: int, n: int) -> Vec3:
     """N-sample coning correction ``[sum_{i<N} k_{N-i} dtheta_i] x dtheta_N`` (rad).
 
-    ``dtheta`` holds at least ``n`` rows of angle increments, oldest first.
+    ``buf[off + 3 i + a]`` is axis a of angle increment i, oldest first.
     """
     ax = ay = az = 0.0
     for i in range(n - 1):
         k = CONING_COEFFS[n, i]
-        ax += k * dtheta[i, 0]
-        ay += k * dtheta[i, 1]
-        az += k * dtheta[i, 2]
-    bx, by, bz = dtheta[n - 1, 0], dtheta[n - 1, 1], dtheta[n - 1, 2]
-    out = np.empty(3)
-    out[0] = ay * bz - az * by
-    out[1] = az * bx - ax * bz
-    out[2] = ax * by - ay * bx
-    return out
+        j = off + 3 * i
+        ax += k * buf[j]
+        ay += k * buf[j + 1]
+        az += k * buf[j + 2]
+    j = off + 3 * (n - 1)
+    bx, by, bz = buf[j], buf[j + 1], buf[j + 2]
+    return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
 
 
 @kernel
-def nsample_sculling(dtheta: np.ndarray, dv: np.ndarray, n: int) -> np.ndarray:
-    """N-sample sculling correction ``sum_{i<N} k_{N-i} (dth_i x dv_N + dv_i x dth_N)``."""
+def nsample_sculling(buf: np.ndarray, off_th: int, off_dv: int, n: int) -> Vec3:
+    """N-sample sculling correction ``sum_{i<N} k_{N-i} (dth_i x dv_N + dv_i x dth_N)`` (m/s).
+
+    Angle increments at ``buf[off_th + 3 i + a]``, velocity increments at ``buf[off_dv + 3 i + a]``.
+    """
     tx = ty = tz = vx = vy = vz = 0.0
     for i in range(n - 1):
         k = CONING_COEFFS[n, i]
-        tx += k * dtheta[i, 0]
-        ty += k * dtheta[i, 1]
-        tz += k * dtheta[i, 2]
-        vx += k * dv[i, 0]
-        vy += k * dv[i, 1]
-        vz += k * dv[i, 2]
-    thx, thy, thz = dtheta[n - 1, 0], dtheta[n - 1, 1], dtheta[n - 1, 2]
-    dvx, dvy, dvz = dv[n - 1, 0], dv[n - 1, 1], dv[n - 1, 2]
-    out = np.empty(3)
-    out[0] = (ty * dvz - tz * dvy) + (vy * thz - vz * thy)
-    out[1] = (tz * dvx - tx * dvz) + (vz * thx - vx * thz)
-    out[2] = (tx * dvy - ty * dvx) + (vx * thy - vy * thx)
-    return out
+        j = off_th + 3 * i
+        m = off_dv + 3 * i
+        tx += k * buf[j]
+        ty += k * buf[j + 1]
+        tz += k * buf[j + 2]
+        vx += k * buf[m]
+        vy += k * buf[m + 1]
+        vz += k * buf[m + 2]
+    j = off_th + 3 * (n - 1)
+    m = off_dv + 3 * (n - 1)
+    thx, thy, thz = buf[j], buf[j + 1], buf[j + 2]
+    dvx, dvy, dvz = buf[m], buf[m + 1], buf[m + 2]
+    return ((ty * dvz - tz * dvy) + (vy * thz - vz * thy),
+            (tz * dvx - tx * dvz) + (vz * thx - vx * thz),
+            (tx * dvy - ty * dvx) + (vx * thy - vy * thx))
 
 
 @kernel
-def rotation_compensation(phi: np.ndarray, dv: np.ndarray) -> np.ndarray:
+def rotation_compensation(px: float, py: float, pz: float, dvx: float, dvy: float, dvz: float) -> Vec3:
     """Savage's closed-form rotation term of the velocity increment (m/s).
 
     ``(1 - cos p)/p^2 (phi x dv) + (1 - sin(p)/p)/p^2 phi x (phi x dv)``,
@@ -92,32 +97,34 @@ def rotation_compensation(phi: np.ndarray, dv: np.ndarray) -> np.ndarray:
     section 7.2.2.2). Its first term is the ``1/2 alpha x v`` rotation
     correction of [TW11] 11.3.
     """
-    p2 = phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2]
-    if p2 < 1e-8:
-        a = 0.5 - p2 / 24.0 + p2 * p2 / 720.0
-        b = 1.0 / 6.0 - p2 / 120.0 + p2 * p2 / 5040.0
+    p2 = px * px + py * py + pz * pz
+    if p2 < 1e-4:  # series to p^6: the first omitted term is below 1e-21
+        a = 0.5 - p2 / 24.0 + p2 * p2 / 720.0 - p2 * p2 * p2 / 40320.0
+        b = 1.0 / 6.0 - p2 / 120.0 + p2 * p2 / 5040.0 - p2 * p2 * p2 / 362880.0
     else:
         p = np.sqrt(p2)
         a = (1.0 - np.cos(p)) / p2
         b = (1.0 - np.sin(p) / p) / p2
-    px, py, pz = phi[0], phi[1], phi[2]
-    c1x = py * dv[2] - pz * dv[1]
-    c1y = pz * dv[0] - px * dv[2]
-    c1z = px * dv[1] - py * dv[0]
-    out = np.empty(3)
-    out[0] = a * c1x + b * (py * c1z - pz * c1y)
-    out[1] = a * c1y + b * (pz * c1x - px * c1z)
-    out[2] = a * c1z + b * (px * c1y - py * c1x)
-    return out
+    c1x = py * dvz - pz * dvy
+    c1y = pz * dvx - px * dvz
+    c1z = px * dvy - py * dvx
+    return (a * c1x + b * (py * c1z - pz * c1y),
+            a * c1y + b * (pz * c1x - px * c1z),
+            a * c1z + b * (px * c1y - py * c1x))
 
 
 @kernel
-def rate_coning(w0: np.ndarray, w1: np.ndarray, h: float) -> np.ndarray:
+def rate_coning(w0x: float, w0y: float, w0z: float, w1x: float, w1y: float, w1z: float, h: float) -> Vec3:
     """Coning inside one interval for linearly varying rate: ``h^2/12 w0 x w1``."""
-    return (h * h / 12.0) * cross(w0, w1)
+    k = h * h / 12.0
+    return k * (w0y * w1z - w0z * w1y), k * (w0z * w1x - w0x * w1z), k * (w0x * w1y - w0y * w1x)
 
 
 @kernel
-def rate_sculling(w0: np.ndarray, f0: np.ndarray, w1: np.ndarray, f1: np.ndarray, h: float) -> np.ndarray:
+def rate_sculling(w0x: float, w0y: float, w0z: float, f0x: float, f0y: float, f0z: float,
+                  w1x: float, w1y: float, w1z: float, f1x: float, f1y: float, f1z: float, h: float) -> Vec3:
     """Sculling inside one interval for linear rate and force: ``h^2/12 (w0 x f1 + f0 x w1)``."""
-    return (h * h / 12.0) * (cross(w0, f1) + cross(f0, w1))
+    k = h * h / 12.0
+    return (k * ((w0y * f1z - w0z * f1y) + (f0y * w1z - f0z * w1y)),
+            k * ((w0z * f1x - w0x * f1z) + (f0z * w1x - f0x * w1z)),
+            k * ((w0x * f1y - w0y * f1x) + (f0x * w1y - f0y * w1x)))

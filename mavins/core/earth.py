@@ -29,11 +29,15 @@ def radii(lat: float) -> tuple[float, float]:
     ``R_N = a(1-e^2)/(1-e^2 sin^2 L)^1.5``, ``R_E = a/(1-e^2 sin^2 L)^0.5``
     (CONVENTIONS.md "Radii"; WGS-84, NIMA TR8350.2).
     """
-    s = np.sin(lat)
-    d = 1.0 - E2 * s * s
+    return radii_sin(np.sin(lat))
+
+
+@kernel
+def radii_sin(sl: float) -> tuple[float, float]:
+    """:func:`radii` from the sine of the latitude."""
+    d = 1.0 - E2 * sl * sl
     r_e = A / np.sqrt(d)
-    r_n = r_e * (1.0 - E2) / d
-    return r_n, r_e
+    return r_e * (1.0 - E2) / d, r_e
 
 
 @kernel
@@ -45,8 +49,16 @@ def gravity(lat: float, h: float) -> float:
     + 3 h^2/a^2]`` (CONVENTIONS.md "Gravity"; plumb-bob gravity, centrifugal
     term included, [ZS1] ch. 1 gravity/gravitation relation).
     """
-    s2 = np.sin(lat) ** 2
-    g0 = GAMMA_E * (1.0 + K_SOMIGLIANA * s2) / np.sqrt(1.0 - E2 * s2)
+    sl = np.sin(lat)
+    return gravity_sin(sl, radii_sin(sl)[1], h)
+
+
+@kernel
+def gravity_sin(sl: float, r_e: float, h: float) -> float:
+    """:func:`gravity` from the sine of the latitude and the prime-vertical radius, using
+    ``1/sqrt(1 - e^2 sin^2 L) = R_E / a``."""
+    s2 = sl * sl
+    g0 = GAMMA_E * (1.0 + K_SOMIGLIANA * s2) * (r_e / A)
     return g0 * (1.0 - 2.0 / A * (1.0 + F + M_RATIO - 2.0 * F * s2) * h + 3.0 * h * h / (A * A))
 
 
@@ -57,10 +69,27 @@ def earth_rate_n(lat: float) -> np.ndarray:
     [TW11] 11.2.4 / 11.4 "navigation algorithm" component form.
     """
     out = np.empty(3)
-    out[0] = OMEGA * np.cos(lat)
-    out[1] = 0.0
-    out[2] = -OMEGA * np.sin(lat)
+    out[0], out[1], out[2] = earth_rate_s(lat)
     return out
+
+
+@kernel
+def earth_rate_s(lat: float) -> tuple[float, float, float]:
+    """:func:`earth_rate_n` as a 3-tuple (allocation-free)."""
+    return OMEGA * np.cos(lat), 0.0, -OMEGA * np.sin(lat)
+
+
+@kernel
+def nav_terms(lat: float, h: float) -> tuple[float, float, float, float, float, float]:
+    """What the navigation equations need at one point, from one sine, one cosine and one
+    square root: the transport-rate coefficients ``k_N = 1/(R_N+h)``, ``k_E = 1/(R_E+h)``,
+    ``k_T = tan L/(R_E+h)`` (1/m; ``w_en^n = [v_E k_E, -v_N k_N, -v_E k_T]``, see
+    :func:`transport_rate`), the Earth rate's north and down components (rad/s, see
+    :func:`earth_rate_n`) and gravity (m/s^2, see :func:`gravity`)."""
+    sl, cl = np.sin(lat), np.cos(lat)
+    r_n, r_e = radii_sin(sl)
+    ke = 1.0 / (r_e + h)
+    return 1.0 / (r_n + h), ke, sl / cl * ke, OMEGA * cl, -OMEGA * sl, gravity_sin(sl, r_e, h)
 
 
 @kernel
@@ -71,30 +100,33 @@ def transport_rate(lat: float, h: float, v: np.ndarray) -> np.ndarray:
     The down component is the NED frame's own pole singularity (tan L); the
     position DCM ``C_n^e`` stays regular.
     """
-    r_n, r_e = radii(lat)
     out = np.empty(3)
-    out[0] = v[1] / (r_e + h)
-    out[1] = -v[0] / (r_n + h)
-    out[2] = -v[1] * np.tan(lat) / (r_e + h)
+    out[0], out[1], out[2] = transport_rate_s(lat, h, v[0], v[1])
     return out
+
+
+@kernel
+def transport_rate_s(lat: float, h: float, vn: float, ve: float) -> tuple[float, float, float]:
+    """:func:`transport_rate` from the north and east velocity (m/s), as a 3-tuple."""
+    kn, ke, kt, wn, wd, g = nav_terms(lat, h)
+    return ve * ke, -vn * kn, -ve * kt
 
 
 @kernel
 def cne_from_latlon(lat: float, lon: float) -> np.ndarray:
     """``C_n^e`` for the NED frame at geodetic latitude/longitude (rad)."""
+    c = np.empty((3, 3))
+    c[0, 0], c[0, 1], c[0, 2], c[1, 0], c[1, 1], c[1, 2], c[2, 0], c[2, 1], c[2, 2] = cne_from_latlon_s(lat, lon)
+    return c
+
+
+@kernel
+def cne_from_latlon_s(lat: float, lon: float) -> tuple[float, float, float, float, float, float, float, float,
+                                                        float]:
+    """:func:`cne_from_latlon` as a row-major 9-tuple."""
     sl, cl = np.sin(lat), np.cos(lat)
     so, co = np.sin(lon), np.cos(lon)
-    c = np.empty((3, 3))
-    c[0, 0] = -sl * co
-    c[0, 1] = -so
-    c[0, 2] = -cl * co
-    c[1, 0] = -sl * so
-    c[1, 1] = co
-    c[1, 2] = -cl * so
-    c[2, 0] = cl
-    c[2, 1] = 0.0
-    c[2, 2] = -sl
-    return c
+    return -sl * co, -so, -cl * co, -sl * so, co, -cl * so, cl, 0.0, -sl
 
 
 @kernel
@@ -104,9 +136,13 @@ def latlon_from_cne(c: np.ndarray) -> tuple[float, float]:
     Latitude from the Earth-z row (``C[2,0] = cos L``, ``C[2,2] = -sin L``),
     longitude from the east column, which stays defined at the poles.
     """
-    lat = np.arctan2(-c[2, 2], np.hypot(c[2, 0], c[2, 1]))
-    lon = np.arctan2(-c[0, 1], c[1, 1])
-    return lat, lon
+    return latlon_from_cne_s(c[0, 1], c[1, 1], c[2, 0], c[2, 1], c[2, 2])
+
+
+@kernel
+def latlon_from_cne_s(c01: float, c11: float, c20: float, c21: float, c22: float) -> tuple[float, float]:
+    """:func:`latlon_from_cne` from the elements it needs."""
+    return np.arctan2(-c22, np.hypot(c20, c21)), np.arctan2(-c01, c11)
 
 
 @kernel
@@ -134,7 +170,6 @@ def ecef_to_lla(p: np.ndarray) -> tuple[float, float, float]:
     h = 0.0
     for _ in range(8):
         r_n, r_e = radii(lat)
-        s = np.sin(lat)
         c = np.cos(lat)
         if abs(c) > 1e-8:
             h = rho / c - r_e

@@ -37,6 +37,11 @@ if not os.environ.get("NUMBA_CACHE_DIR"):
     numba.config.CACHE_DIR = _cache_dir()
 
 
+def cache_is_warm() -> bool:
+    """Whether compiled kernels of this core version are already on disk (numba index files)."""
+    return any(Path(numba.config.CACHE_DIR).rglob("*.nbi"))
+
+
 def kernel(func: F) -> F:
     """Compile ``func`` in nopython mode with the on-disk cache."""
     return numba.njit(cache=True, nogil=True, error_model="numpy")(func)

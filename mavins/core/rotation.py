@@ -20,9 +20,31 @@ import numpy as np
 
 from .jit import kernel
 
-# Below this angle (rad) the series forms are used; their truncation error
-# (s^6 terms) is then far below double precision.
-SMALL_ANGLE = 1e-4
+# Below this angle (rad) the series forms of exp(phi) are used, to the s^6
+# term: the first omitted (s^8 / 8! and smaller) is then below 1e-20, far
+# below double precision.
+SMALL_ANGLE = 1e-2
+# The inverse series (quaternion to rotation vector) converges slower (x^6/7).
+SMALL_ANGLE_LOG = 1e-4
+
+Quat = tuple[float, float, float, float]
+Mat9 = tuple[float, float, float, float, float, float, float, float, float]
+
+
+@kernel
+def _vec4(t: Quat) -> np.ndarray:
+    out = np.empty(4)
+    out[0], out[1], out[2], out[3] = t[0], t[1], t[2], t[3]
+    return out
+
+
+@kernel
+def _mat3(t: Mat9) -> np.ndarray:
+    out = np.empty((3, 3))
+    out[0, 0], out[0, 1], out[0, 2] = t[0], t[1], t[2]
+    out[1, 0], out[1, 1], out[1, 2] = t[3], t[4], t[5]
+    out[2, 0], out[2, 1], out[2, 2] = t[6], t[7], t[8]
+    return out
 
 
 @kernel
@@ -70,12 +92,18 @@ def mat_vec(a: np.ndarray, v: np.ndarray) -> np.ndarray:
 @kernel
 def quat_mul(p: np.ndarray, q: np.ndarray) -> np.ndarray:
     """Hamilton product ``p (x) q`` (Savage, Strapdown Analytics, quaternion algebra; Hamilton convention of CONVENTIONS.md)."""
-    out = np.empty(4)
-    out[0] = p[0] * q[0] - p[1] * q[1] - p[2] * q[2] - p[3] * q[3]
-    out[1] = p[0] * q[1] + p[1] * q[0] + p[2] * q[3] - p[3] * q[2]
-    out[2] = p[0] * q[2] - p[1] * q[3] + p[2] * q[0] + p[3] * q[1]
-    out[3] = p[0] * q[3] + p[1] * q[2] - p[2] * q[1] + p[3] * q[0]
-    return out
+    return _vec4(quat_mul_s((p[0], p[1], p[2], p[3]), (q[0], q[1], q[2], q[3])))
+
+
+@kernel
+def quat_mul_s(p: Quat, q: Quat) -> Quat:
+    """:func:`quat_mul` on 4-tuples (allocation-free, for the hot loop)."""
+    p0, p1, p2, p3 = p
+    q0, q1, q2, q3 = q
+    return (p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3,
+            p0 * q1 + p1 * q0 + p2 * q3 - p3 * q2,
+            p0 * q2 - p1 * q3 + p2 * q0 + p3 * q1,
+            p0 * q3 + p1 * q2 - p2 * q1 + p3 * q0)
 
 
 @kernel
@@ -116,18 +144,16 @@ def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
 @kernel
 def quat_to_dcm(q: np.ndarray) -> np.ndarray:
     """DCM of a unit quaternion, ``v_n = C(q) v_b`` (Savage, Strapdown Analytics, quaternion/DCM relation)."""
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    c = np.empty((3, 3))
-    c[0, 0] = w * w + x * x - y * y - z * z
-    c[0, 1] = 2.0 * (x * y - w * z)
-    c[0, 2] = 2.0 * (x * z + w * y)
-    c[1, 0] = 2.0 * (x * y + w * z)
-    c[1, 1] = w * w - x * x + y * y - z * z
-    c[1, 2] = 2.0 * (y * z - w * x)
-    c[2, 0] = 2.0 * (x * z - w * y)
-    c[2, 1] = 2.0 * (y * z + w * x)
-    c[2, 2] = w * w - x * x - y * y + z * z
-    return c
+    return _mat3(quat_to_dcm_s((q[0], q[1], q[2], q[3])))
+
+
+@kernel
+def quat_to_dcm_s(q: Quat) -> Mat9:
+    """:func:`quat_to_dcm` on a 4-tuple; the DCM as a row-major 9-tuple."""
+    w, x, y, z = q
+    return (w * w + x * x - y * y - z * z, 2.0 * (x * y - w * z), 2.0 * (x * z + w * y),
+            2.0 * (x * y + w * z), w * w - x * x + y * y - z * z, 2.0 * (y * z - w * x),
+            2.0 * (x * z - w * y), 2.0 * (y * z + w * x), w * w - x * x - y * y + z * z)
 
 
 @kernel
@@ -137,53 +163,47 @@ def dcm_to_quat(c: np.ndarray) -> np.ndarray:
     Shepperd's method: pick the largest of the four squared components so the
     division is always well conditioned (Shepperd 1978).
     """
-    tr = c[0, 0] + c[1, 1] + c[2, 2]
-    q = np.empty(4)
-    if tr >= c[0, 0] and tr >= c[1, 1] and tr >= c[2, 2]:
+    return _vec4(dcm_to_quat_s((c[0, 0], c[0, 1], c[0, 2], c[1, 0], c[1, 1], c[1, 2], c[2, 0], c[2, 1], c[2, 2])))
+
+
+@kernel
+def dcm_to_quat_s(c: Mat9) -> Quat:
+    """:func:`dcm_to_quat` of a row-major 9-tuple."""
+    c00, c01, c02, c10, c11, c12, c20, c21, c22 = c
+    tr = c00 + c11 + c22
+    if tr >= c00 and tr >= c11 and tr >= c22:
         s = 2.0 * np.sqrt(1.0 + tr)
-        q[0] = 0.25 * s
-        q[1] = (c[2, 1] - c[1, 2]) / s
-        q[2] = (c[0, 2] - c[2, 0]) / s
-        q[3] = (c[1, 0] - c[0, 1]) / s
-    elif c[0, 0] >= c[1, 1] and c[0, 0] >= c[2, 2]:
-        s = 2.0 * np.sqrt(1.0 + c[0, 0] - c[1, 1] - c[2, 2])
-        q[0] = (c[2, 1] - c[1, 2]) / s
-        q[1] = 0.25 * s
-        q[2] = (c[0, 1] + c[1, 0]) / s
-        q[3] = (c[0, 2] + c[2, 0]) / s
-    elif c[1, 1] >= c[2, 2]:
-        s = 2.0 * np.sqrt(1.0 - c[0, 0] + c[1, 1] - c[2, 2])
-        q[0] = (c[0, 2] - c[2, 0]) / s
-        q[1] = (c[0, 1] + c[1, 0]) / s
-        q[2] = 0.25 * s
-        q[3] = (c[1, 2] + c[2, 1]) / s
+        q0, q1, q2, q3 = 0.25 * s, (c21 - c12) / s, (c02 - c20) / s, (c10 - c01) / s
+    elif c00 >= c11 and c00 >= c22:
+        s = 2.0 * np.sqrt(1.0 + c00 - c11 - c22)
+        q0, q1, q2, q3 = (c21 - c12) / s, 0.25 * s, (c01 + c10) / s, (c02 + c20) / s
+    elif c11 >= c22:
+        s = 2.0 * np.sqrt(1.0 - c00 + c11 - c22)
+        q0, q1, q2, q3 = (c02 - c20) / s, (c01 + c10) / s, 0.25 * s, (c12 + c21) / s
     else:
-        s = 2.0 * np.sqrt(1.0 - c[0, 0] - c[1, 1] + c[2, 2])
-        q[0] = (c[1, 0] - c[0, 1]) / s
-        q[1] = (c[0, 2] + c[2, 0]) / s
-        q[2] = (c[1, 2] + c[2, 1]) / s
-        q[3] = 0.25 * s
-    q = quat_normalize(q)
-    return quat_canonical(q)
+        s = 2.0 * np.sqrt(1.0 - c00 - c11 + c22)
+        q0, q1, q2, q3 = (c10 - c01) / s, (c02 + c20) / s, (c12 + c21) / s, 0.25 * s
+    n = np.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+    if q0 < 0.0:
+        n = -n
+    return q0 / n, q1 / n, q2 / n, q3 / n
 
 
 @kernel
 def euler_to_dcm(roll: float, pitch: float, yaw: float) -> np.ndarray:
     """``C_b^n = Rz(yaw) Ry(pitch) Rx(roll)`` ([DE] section 2, ZYX DCM product)."""
+    return _mat3(euler_to_dcm_s(roll, pitch, yaw))
+
+
+@kernel
+def euler_to_dcm_s(roll: float, pitch: float, yaw: float) -> Mat9:
+    """:func:`euler_to_dcm` as a row-major 9-tuple."""
     cr, sr = np.cos(roll), np.sin(roll)
     cp, sp = np.cos(pitch), np.sin(pitch)
     cy, sy = np.cos(yaw), np.sin(yaw)
-    c = np.empty((3, 3))
-    c[0, 0] = cp * cy
-    c[0, 1] = -cr * sy + sr * sp * cy
-    c[0, 2] = sr * sy + cr * sp * cy
-    c[1, 0] = cp * sy
-    c[1, 1] = cr * cy + sr * sp * sy
-    c[1, 2] = -sr * cy + cr * sp * sy
-    c[2, 0] = -sp
-    c[2, 1] = sr * cp
-    c[2, 2] = cr * cp
-    return c
+    return (cp * cy, -cr * sy + sr * sp * cy, sr * sy + cr * sp * cy,
+            cp * sy, cr * cy + sr * sp * sy, -sr * cy + cr * sp * sy,
+            -sp, sr * cp, cr * cp)
 
 
 @kernel
@@ -204,22 +224,34 @@ def dcm_to_euler(c: np.ndarray) -> np.ndarray:
     Inverse of :func:`euler_to_dcm` (CONVENTIONS.md Euler ranges). At pitch = +-90 deg
     roll and yaw are not separable; roll is then set to 0.
     """
-    s = -c[2, 0]
+    r, p, y = dcm_to_euler_s(c[0, 0], c[0, 1], c[1, 0], c[1, 1], c[2, 0], c[2, 1], c[2, 2])
+    out = np.empty(3)
+    out[0] = r
+    out[1] = p
+    out[2] = y
+    return out
+
+
+@kernel
+def dcm_to_euler_s(c00: float, c01: float, c10: float, c11: float, c20: float, c21: float,
+                   c22: float) -> tuple[float, float, float]:
+    """:func:`dcm_to_euler` from the DCM elements it needs."""
+    s = -c20
     if s > 1.0:
         s = 1.0
     elif s < -1.0:
         s = -1.0
     pitch = np.arcsin(s)
-    out = np.empty(3)
     if abs(s) > 1.0 - 1e-15:
-        out[0] = 0.0
-        out[1] = pitch
-        out[2] = wrap_pi(np.arctan2(-c[0, 1], c[1, 1]))
-        return out
-    out[0] = wrap_pi(np.arctan2(c[2, 1], c[2, 2]))
-    out[1] = pitch
-    out[2] = wrap_pi(np.arctan2(c[1, 0], c[0, 0]))
-    return out
+        return 0.0, pitch, _atan2_half_open(-c01, c11)
+    return _atan2_half_open(c21, c22), pitch, _atan2_half_open(c10, c00)
+
+
+@kernel
+def _atan2_half_open(y: float, x: float) -> float:
+    """``atan2`` mapped to (-pi, pi] (it returns -pi for y = -0.0, x < 0)."""
+    a = np.arctan2(y, x)
+    return np.pi if a <= -np.pi else a
 
 
 @kernel
@@ -248,26 +280,27 @@ def rotvec_to_quat(phi: np.ndarray) -> np.ndarray:
 
     Bortz 1971; the exact form of the truncated series in CONVENTIONS.md ``--order``.
     """
-    s2 = phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2]
-    s = np.sqrt(s2)
-    if s < SMALL_ANGLE:
-        c = 1.0 - s2 / 8.0 + s2 * s2 / 384.0
-        k = 0.5 - s2 / 48.0 + s2 * s2 / 3840.0
+    return _vec4(rotvec_to_quat_s(phi[0], phi[1], phi[2]))
+
+
+@kernel
+def rotvec_to_quat_s(x: float, y: float, z: float) -> Quat:
+    """:func:`rotvec_to_quat` on scalars."""
+    s2 = x * x + y * y + z * z
+    if s2 < SMALL_ANGLE * SMALL_ANGLE:
+        c = 1.0 - s2 / 8.0 + s2 * s2 / 384.0 - s2 * s2 * s2 / 46080.0
+        k = 0.5 - s2 / 48.0 + s2 * s2 / 3840.0 - s2 * s2 * s2 / 645120.0
     else:
+        s = np.sqrt(s2)
         c = np.cos(0.5 * s)
         k = np.sin(0.5 * s) / s
-    return quat_from_coeffs(phi, c, k)
+    return c, k * x, k * y, k * z
 
 
 @kernel
 def quat_from_coeffs(phi: np.ndarray, c: float, k: float) -> np.ndarray:
     """``[c, k phi]``: the quaternion form shared by the exact and truncated updates."""
-    q = np.empty(4)
-    q[0] = c
-    q[1] = k * phi[0]
-    q[2] = k * phi[1]
-    q[3] = k * phi[2]
-    return q
+    return _vec4((c, k * phi[0], k * phi[1], k * phi[2]))
 
 
 @kernel
@@ -276,7 +309,7 @@ def quat_to_rotvec(q: np.ndarray) -> np.ndarray:
     qc = quat_canonical(q)
     v = np.sqrt(qc[1] * qc[1] + qc[2] * qc[2] + qc[3] * qc[3])
     angle = 2.0 * np.arctan2(v, qc[0])
-    if v < SMALL_ANGLE:
+    if v < SMALL_ANGLE_LOG:
         # angle / v = 2 atan(x) / v with x = v / w: 2/w (1 - x^2/3 + x^4/5)
         x2 = v * v / (qc[0] * qc[0])
         k = 2.0 / qc[0] * (1.0 - x2 / 3.0 + x2 * x2 / 5.0)
@@ -295,16 +328,21 @@ def rotvec_to_dcm(phi: np.ndarray) -> np.ndarray:
 
     [TW11] slide "11.2.1 DCM algorithm".
     """
-    x, y, z = phi[0], phi[1], phi[2]
+    return _mat3(rotvec_to_dcm_s(phi[0], phi[1], phi[2]))
+
+
+@kernel
+def rotvec_to_dcm_s(x: float, y: float, z: float) -> Mat9:
+    """:func:`rotvec_to_dcm` on scalars; row-major 9-tuple."""
     s2 = x * x + y * y + z * z
     if s2 < SMALL_ANGLE * SMALL_ANGLE:
-        a1 = 1.0 - s2 / 6.0 + s2 * s2 / 120.0
-        a2 = 0.5 - s2 / 24.0 + s2 * s2 / 720.0
+        a1 = 1.0 - s2 / 6.0 + s2 * s2 / 120.0 - s2 * s2 * s2 / 5040.0
+        a2 = 0.5 - s2 / 24.0 + s2 * s2 / 720.0 - s2 * s2 * s2 / 40320.0
     else:
         s = np.sqrt(s2)
         a1 = np.sin(s) / s
         a2 = (1.0 - np.cos(s)) / s2
-    return dcm_from_coeffs(phi, a1, a2)
+    return dcm_from_coeffs_s(x, y, z, a1, a2)
 
 
 @kernel
@@ -313,19 +351,26 @@ def dcm_from_coeffs(phi: np.ndarray, a1: float, a2: float) -> np.ndarray:
 
     The DCM form shared by the exact and truncated updates ([TW11] 11.2.1).
     """
-    x, y, z = phi[0], phi[1], phi[2]
+    return _mat3(dcm_from_coeffs_s(phi[0], phi[1], phi[2], a1, a2))
+
+
+@kernel
+def dcm_from_coeffs_s(x: float, y: float, z: float, a1: float, a2: float) -> Mat9:
+    """:func:`dcm_from_coeffs` on scalars; row-major 9-tuple."""
     s2 = x * x + y * y + z * z
-    c = np.empty((3, 3))
-    c[0, 0] = 1.0 + a2 * (x * x - s2)
-    c[0, 1] = -a1 * z + a2 * x * y
-    c[0, 2] = a1 * y + a2 * x * z
-    c[1, 0] = a1 * z + a2 * x * y
-    c[1, 1] = 1.0 + a2 * (y * y - s2)
-    c[1, 2] = -a1 * x + a2 * y * z
-    c[2, 0] = -a1 * y + a2 * x * z
-    c[2, 1] = a1 * x + a2 * y * z
-    c[2, 2] = 1.0 + a2 * (z * z - s2)
-    return c
+    return (1.0 + a2 * (x * x - s2), -a1 * z + a2 * x * y, a1 * y + a2 * x * z,
+            a1 * z + a2 * x * y, 1.0 + a2 * (y * y - s2), -a1 * x + a2 * y * z,
+            -a1 * y + a2 * x * z, a1 * x + a2 * y * z, 1.0 + a2 * (z * z - s2))
+
+
+@kernel
+def mat3_mul_s(a: Mat9, b: Mat9) -> Mat9:
+    """Product of two 3x3 matrices held as row-major 9-tuples."""
+    a0, a1, a2, a3, a4, a5, a6, a7, a8 = a
+    b0, b1, b2, b3, b4, b5, b6, b7, b8 = b
+    return (a0 * b0 + a1 * b3 + a2 * b6, a0 * b1 + a1 * b4 + a2 * b7, a0 * b2 + a1 * b5 + a2 * b8,
+            a3 * b0 + a4 * b3 + a5 * b6, a3 * b1 + a4 * b4 + a5 * b7, a3 * b2 + a4 * b5 + a5 * b8,
+            a6 * b0 + a7 * b3 + a8 * b6, a6 * b1 + a7 * b4 + a8 * b7, a6 * b2 + a7 * b5 + a8 * b8)
 
 
 @kernel
@@ -342,8 +387,18 @@ def orthonormalize(c: np.ndarray) -> np.ndarray:
     Removes the first-order non-orthogonality; applied every update it keeps
     the DCM orthonormal to round-off.
     """
-    e = mat_mul(c, c.T) - np.eye(3)
-    return c - 0.5 * mat_mul(e, c)
+    return _mat3(orthonormalize_s((c[0, 0], c[0, 1], c[0, 2], c[1, 0], c[1, 1], c[1, 2], c[2, 0], c[2, 1], c[2, 2])))
+
+
+@kernel
+def orthonormalize_s(c: Mat9) -> Mat9:
+    """:func:`orthonormalize` of a row-major 9-tuple: ``C - 1/2 (C C^T - I) C``."""
+    c0, c1, c2, c3, c4, c5, c6, c7, c8 = c
+    ct = (c0, c3, c6, c1, c4, c7, c2, c5, c8)
+    e0, e1, e2, e3, e4, e5, e6, e7, e8 = mat3_mul_s(c, ct)
+    d0, d1, d2, d3, d4, d5, d6, d7, d8 = mat3_mul_s((e0 - 1.0, e1, e2, e3, e4 - 1.0, e5, e6, e7, e8 - 1.0), c)
+    return (c0 - 0.5 * d0, c1 - 0.5 * d1, c2 - 0.5 * d2, c3 - 0.5 * d3, c4 - 0.5 * d4, c5 - 0.5 * d5,
+            c6 - 0.5 * d6, c7 - 0.5 * d7, c8 - 0.5 * d8)
 
 
 @kernel

@@ -44,20 +44,18 @@ from .coning import (
 )
 from .jit import kernel
 from .rotation import (
-    cross,
-    dcm_from_coeffs,
-    dcm_to_euler,
-    dcm_to_quat,
-    mat_mul,
-    mat_vec,
-    euler_to_dcm,
-    orthonormalize,
-    quat_canonical,
-    quat_from_coeffs,
-    quat_mul,
-    quat_to_dcm,
-    rotvec_to_dcm,
-    rotvec_to_quat,
+    Mat9,
+    Quat,
+    dcm_from_coeffs_s,
+    dcm_to_euler_s,
+    dcm_to_quat_s,
+    euler_to_dcm_s,
+    mat3_mul_s,
+    orthonormalize_s,
+    quat_mul_s,
+    quat_to_dcm_s,
+    rotvec_to_dcm_s,
+    rotvec_to_quat_s,
 )
 
 # --- configuration vector -------------------------------------------------
@@ -81,8 +79,10 @@ S_T = 0  # time of the last k update (s)
 S_Q = 1  # q_nb [w x y z]
 S_C = 5  # C_b^n, row-major
 S_V = 14  # v^n (m/s) at k
-S_VP = 17  # v^n at k-1
-S_VPP = 20  # v^n at k-2
+S_VP = 17  # v^n at the update before the last
+S_LATC = 20  # latitude (rad) of C_n^e, kept with it (sync_position)
+S_LONC = 21  # longitude (rad) of C_n^e, likewise
+# 22 unused
 S_CNE = 23  # C_n^e, row-major
 S_H = 32  # ellipsoidal height (m)
 S_PF = 33  # flat NED offset from the start (earth = none)
@@ -108,7 +108,10 @@ S_PFO = 102  # previous force sample f (sampled rates)
 S_HAVEP = 105  # 1 once a previous rate sample exists
 S_TJ = 106  # time of the last accepted sample (s)
 S_NL = 107  # k cycles since the last l cycle
-S_SIZE = 110
+S_KN = 108  # l-cycle 1/(R_N + h) (1/m): w_en^n = [v_E k_E, -v_N k_N, -v_E k_T]
+S_KE = 109  # l-cycle 1/(R_E + h) (1/m)
+S_KT = 110  # l-cycle tan L/(R_E + h) (1/m)
+S_SIZE = 111
 
 OUT_COLUMNS = ("t", "lat", "lon", "h", "vn", "ve", "vd", "roll", "pitch", "yaw", "qw", "qx", "qy", "qz")
 OUT_SIZE = len(OUT_COLUMNS)
@@ -160,6 +163,16 @@ def make_config(
 
 
 @kernel
+def _get9(s: np.ndarray, o: int) -> Mat9:
+    return s[o], s[o + 1], s[o + 2], s[o + 3], s[o + 4], s[o + 5], s[o + 6], s[o + 7], s[o + 8]
+
+
+@kernel
+def _put9(s: np.ndarray, o: int, c: Mat9) -> None:
+    s[o], s[o + 1], s[o + 2], s[o + 3], s[o + 4], s[o + 5], s[o + 6], s[o + 7], s[o + 8] = c
+
+
+@kernel
 def init_state(
     t: float, lat: float, lon: float, h: float, v: np.ndarray, roll: float, pitch: float, yaw: float
 ) -> np.ndarray:
@@ -167,20 +180,22 @@ def init_state(
     s = np.zeros(S_SIZE)
     s[S_T] = t
     s[S_TJ] = t
-    c = euler_to_dcm(roll, pitch, yaw)
-    s[S_C : S_C + 9] = c.ravel()
-    s[S_Q : S_Q + 4] = dcm_to_quat(c)
+    c = euler_to_dcm_s(roll, pitch, yaw)
+    _put9(s, S_C, c)
+    s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3] = dcm_to_quat_s(c)
     for i in range(3):
         s[S_V + i] = v[i]
         s[S_VP + i] = v[i]
-        s[S_VPP + i] = v[i]
-    s[S_CNE : S_CNE + 9] = earth.cne_from_latlon(lat, lon).ravel()
+    _put9(s, S_CNE, earth.cne_from_latlon_s(lat, lon))
     s[S_H] = h
     s[S_LAT0] = lat
     s[S_LON0] = lon
     s[S_H0] = h
     s[S_VD0] = v[2]
     s[S_G0] = earth.gravity(lat, h)
+    s[S_LATC] = lat
+    s[S_LONC] = lon
+    s[S_KN] = 1.0 / (earth.radii(lat)[0] + h)
     return s
 
 
@@ -188,7 +203,8 @@ def init_state(
 def position(s: np.ndarray, cfg: np.ndarray) -> tuple[float, float, float]:
     """Latitude, longitude (rad) and height (m) of the state."""
     if cfg[CFG_EARTH] > 0.5:
-        lat, lon = earth.latlon_from_cne(s[S_CNE : S_CNE + 9].reshape(3, 3))
+        c = S_CNE
+        lat, lon = earth.latlon_from_cne_s(s[c + 1], s[c + 4], s[c + 6], s[c + 7], s[c + 8])
         return lat, lon, s[S_H]
     # earth = none: flat NED offset mapped through the start point's radii.
     r_n, r_e = earth.radii(s[S_LAT0])
@@ -199,30 +215,50 @@ def position(s: np.ndarray, cfg: np.ndarray) -> tuple[float, float, float]:
 
 
 @kernel
-def solution_row(s: np.ndarray, cfg: np.ndarray, out: np.ndarray) -> None:
-    """Write ``t,lat,lon,h,vn,ve,vd,roll,pitch,yaw,qw,qx,qy,qz`` (rad) into out."""
+def sync_position(s: np.ndarray, cfg: np.ndarray) -> None:
+    """Refresh the latitude/longitude kept beside C_n^e; call after writing C_n^e or h directly."""
     lat, lon, h = position(s, cfg)
-    out[0] = s[S_T]
-    out[1] = lat
-    out[2] = lon
-    out[3] = h
-    out[4] = s[S_V]
-    out[5] = s[S_V + 1]
-    out[6] = s[S_V + 2]
-    e = dcm_to_euler(s[S_C : S_C + 9].reshape(3, 3))
-    out[7] = e[0]
-    out[8] = e[1]
-    out[9] = e[2]
-    q = quat_canonical(s[S_Q : S_Q + 4])
-    out[10] = q[0]
-    out[11] = q[1]
-    out[12] = q[2]
-    out[13] = q[3]
+    s[S_LATC] = lat
+    s[S_LONC] = lon
 
 
 @kernel
-def body_update_quat(sigma: np.ndarray, order: int) -> np.ndarray:
-    """Quaternion of the body rotation vector, truncated to ``order``.
+def solution_row(s: np.ndarray, cfg: np.ndarray, out: np.ndarray) -> None:
+    """Write ``t,lat,lon,h,vn,ve,vd,roll,pitch,yaw,qw,qx,qy,qz`` (rad) into out."""
+    out[0] = s[S_T]
+    out[1] = s[S_LATC]
+    out[2] = s[S_LONC]
+    out[3] = s[S_H] if cfg[CFG_EARTH] > 0.5 else s[S_H0] - s[S_PF + 2]
+    out[4] = s[S_V]
+    out[5] = s[S_V + 1]
+    out[6] = s[S_V + 2]
+    c = S_C
+    out[7], out[8], out[9] = dcm_to_euler_s(s[c], s[c + 1], s[c + 3], s[c + 4], s[c + 6], s[c + 7], s[c + 8])
+    sign = -1.0 if s[S_Q] < 0.0 else 1.0  # the same rotation with a non-negative scalar part
+    for a in range(4):
+        out[10 + a] = sign * s[S_Q + a]
+
+
+# --- state access for the stateful shells (engine, filter) ------------------
+def state_time(s: np.ndarray) -> float:
+    """Time (s) of the state's last k update."""
+    return float(s[S_T])
+
+
+def skip_to(s: np.ndarray, t: float) -> None:
+    """Move the state's sample clock to ``t`` (s) without integrating the interval.
+
+    For a sensor-time gap that must not be integrated: the next sample covers
+    only its own nominal interval, and with sampled rates it opens a fresh one.
+    """
+    s[S_TJ] = max(s[S_TJ], t)
+    s[S_HAVEP] = 0.0
+
+
+# --- the k cycle in named steps -------------------------------------------
+@kernel
+def body_update_quat(x: float, y: float, z: float, order: int) -> Quat:
+    """Quaternion of the body rotation vector sigma = (x, y, z), truncated to ``order``.
 
     ``r = [a_c, a_s sigma]`` with ``(a_c, a_s)`` = (1, 1/2), (1 - s^2/8, 1/2),
     (1 - s^2/8, 1/2 - s^2/48), (1 - s^2/8 + s^4/384, 1/2 - s^2/48) for orders
@@ -230,8 +266,8 @@ def body_update_quat(sigma: np.ndarray, order: int) -> np.ndarray:
     quaternion error analysis and table 11.2; CONVENTIONS.md ``--order``).
     """
     if order == 0:
-        return rotvec_to_quat(sigma)
-    s2 = sigma[0] * sigma[0] + sigma[1] * sigma[1] + sigma[2] * sigma[2]
+        return rotvec_to_quat_s(x, y, z)
+    s2 = x * x + y * y + z * z
     if order == 1:
         ac, as_ = 1.0, 0.5
     elif order == 2:
@@ -240,20 +276,20 @@ def body_update_quat(sigma: np.ndarray, order: int) -> np.ndarray:
         ac, as_ = 1.0 - s2 / 8.0, 0.5 - s2 / 48.0
     else:
         ac, as_ = 1.0 - s2 / 8.0 + s2 * s2 / 384.0, 0.5 - s2 / 48.0
-    return quat_from_coeffs(sigma, ac, as_)
+    return ac, as_ * x, as_ * y, as_ * z
 
 
 @kernel
-def body_update_dcm(sigma: np.ndarray, order: int) -> np.ndarray:
-    """``A = I + a1 [s x] + a2 [s x]^2`` truncated to ``order``.
+def body_update_dcm(x: float, y: float, z: float, order: int) -> Mat9:
+    """``A = I + a1 [s x] + a2 [s x]^2`` truncated to ``order`` (row-major 9-tuple).
 
     ``(a1, a2)`` = (1, 0), (1, 1/2), (1 - s^2/6, 1/2), (1 - s^2/6, 1/2 - s^2/24)
     for orders 1..4, exact ``(sin s/s, (1 - cos s)/s^2)`` for order 0
     ([TW11] slide "11.2.1 DCM algorithm"; CONVENTIONS.md ``--order``).
     """
     if order == 0:
-        return rotvec_to_dcm(sigma)
-    s2 = sigma[0] * sigma[0] + sigma[1] * sigma[1] + sigma[2] * sigma[2]
+        return rotvec_to_dcm_s(x, y, z)
+    s2 = x * x + y * y + z * z
     if order == 1:
         a1, a2 = 1.0, 0.0
     elif order == 2:
@@ -262,108 +298,116 @@ def body_update_dcm(sigma: np.ndarray, order: int) -> np.ndarray:
         a1, a2 = 1.0 - s2 / 6.0, 0.5
     else:
         a1, a2 = 1.0 - s2 / 6.0, 0.5 - s2 / 24.0
-    return dcm_from_coeffs(sigma, a1, a2)
+    return dcm_from_coeffs_s(x, y, z, a1, a2)
 
 
 @kernel
-def _l_cycle(s: np.ndarray, cfg: np.ndarray, T: float, v_mid: np.ndarray) -> None:
-    """Slow terms at the extrapolated mid-interval point (l cycle)."""
+def _body_increments(s: np.ndarray, cfg: np.ndarray, n: int) -> tuple[float, float, float, float, float, float,
+                                                                      float, float, float]:
+    """Step 1, increments: the k cycle's body rotation vector sigma (rad, coning included),
+    summed velocity increment and its sculling term (m/s), body frame ([TW11] 11.2.2, 11.3; coning.py)."""
+    sx = sy = sz = vx = vy = vz = 0.0
+    for i in range(n):
+        j = S_BTH + 3 * i
+        m = S_BDV + 3 * i
+        sx += s[j]
+        sy += s[j + 1]
+        sz += s[j + 2]
+        vx += s[m]
+        vy += s[m + 1]
+        vz += s[m + 2]
+    cx = cy = cz = ux = uy = uz = 0.0
+    if cfg[CFG_CONING] > 0.5 and n >= 2:
+        if cfg[CFG_SAMPLED] > 0.5:
+            cx, cy, cz = s[S_CONE], s[S_CONE + 1], s[S_CONE + 2]
+            ux, uy, uz = s[S_SCUL], s[S_SCUL + 1], s[S_SCUL + 2]
+        else:
+            cx, cy, cz = nsample_coning(s, S_BTH, n)
+            ux, uy, uz = nsample_sculling(s, S_BTH, S_BDV, n)
+    return sx + cx, sy + cy, sz + cz, vx, vy, vz, ux, uy, uz
+
+
+@kernel
+def _l_cycle(s: np.ndarray, cfg: np.ndarray, T: float, lat: float, h: float, vmx: float, vmy: float,
+             vmz: float) -> None:
+    """Slow terms at the extrapolated mid-interval point (l cycle): Earth rate, transport
+    rate (and its radius coefficients, which the position step reuses) and gravity
+    ([TW11] 11.4, "evaluated at the l rate"); lat (rad), h (m) at the start of the interval."""
     if cfg[CFG_EARTH] < 0.5:
         for i in range(3):
             s[S_WIE + i] = 0.0
             s[S_WEN + i] = 0.0
         s[S_G] = s[S_G0]
         return
-    lat, lon, h = position(s, cfg)
-    r_n, r_e = earth.radii(lat)
-    lat_mid = lat + 0.5 * T * v_mid[0] / (r_n + h)
-    h_mid = h - 0.5 * T * v_mid[2]
-    s[S_WIE : S_WIE + 3] = earth.earth_rate_n(lat_mid)
-    s[S_WEN : S_WEN + 3] = earth.transport_rate(lat_mid, h_mid, v_mid)
-    s[S_G] = earth.gravity(lat_mid, h_mid)
+    lat_mid = lat + 0.5 * T * vmx * s[S_KN]
+    h_mid = h - 0.5 * T * vmz
+    kn, ke, kt, wn, wd, g = earth.nav_terms(lat_mid, h_mid)
+    s[S_KN], s[S_KE], s[S_KT] = kn, ke, kt
+    s[S_WIE], s[S_WIE + 1], s[S_WIE + 2] = wn, 0.0, wd
+    s[S_WEN], s[S_WEN + 1], s[S_WEN + 2] = vmy * ke, -vmx * kn, -vmy * kt
+    s[S_G] = g
 
 
 @kernel
-def k_update(s: np.ndarray, cfg: np.ndarray) -> None:
-    """One attitude/velocity/position update over the buffered samples (k cycle).
+def _velocity_step(s: np.ndarray, T: float, sgx: float, sgy: float, sgz: float, vsx: float, vsy: float,
+                   vsz: float, scx: float, scy: float, scz: float, zx: float, zy: float, zz: float,
+                   vmx: float, vmy: float, vmz: float) -> tuple[float, float, float]:
+    """Step 2, velocity (m/s, NED) at the end of the k cycle, from the attitude at its start.
 
-    Vector arithmetic is written on scalars so the update allocates only a few
-    small arrays (it runs once per N samples, up to several kHz).
+    ``v(k) = v(k-1) + u^n + [g - (2 w_ie + w_en) x v_mid] T`` with ``u^n = (I -
+    1/2 [zeta x]) C_b^n(k-1) (V + rot(sigma, V) + dv_scul)`` ([TW11] 11.3, lecture
+    eq. 11.64, and 11.4; the ``-1/2 zeta x`` term is Savage's navigation-frame
+    rotation correction, Strapdown Analytics 7.2.2.2).
     """
-    n = int(s[S_NJ])
-    T = s[S_BUFT]
-    dth = s[S_BTH : S_BTH + 18].reshape(6, 3)
-    dvs = s[S_BDV : S_BDV + 18].reshape(6, 3)
-    sigma = np.zeros(3)
-    vsum = np.zeros(3)
-    for i in range(n):
-        for a in range(3):
-            sigma[a] += dth[i, a]
-            vsum[a] += dvs[i, a]
-
-    # Body rotation vector and sculling ([TW11] 11.2.2, 11.3; coning.py).
-    scx = scy = scz = 0.0
-    if cfg[CFG_CONING] > 0.5 and n >= 2:
-        if cfg[CFG_SAMPLED] > 0.5:
-            for a in range(3):
-                sigma[a] += s[S_CONE + a]
-            scx, scy, scz = s[S_SCUL], s[S_SCUL + 1], s[S_SCUL + 2]
-        else:
-            cone = nsample_coning(dth, n)
-            scul = nsample_sculling(dth, dvs, n)
-            for a in range(3):
-                sigma[a] += cone[a]
-            scx, scy, scz = scul[0], scul[1], scul[2]
-
-    vox, voy, voz = s[S_V], s[S_V + 1], s[S_V + 2]
-    vpx, vpy, vpz = s[S_VP], s[S_VP + 1], s[S_VP + 2]
-    # Mid-interval velocity extrapolated from the last two updates ([TW11] 11.4,
-    # Coriolis and gravity "evaluated at the l rate").
-    vmx, vmy, vmz = 1.5 * vox - 0.5 * vpx, 1.5 * voy - 0.5 * vpy, 1.5 * voz - 0.5 * vpz
-    if int(s[S_NL]) % int(cfg[CFG_L_EVERY]) == 0:
-        _l_cycle(s, cfg, T, np.array([vmx, vmy, vmz]))
-    s[S_NL] += 1.0
-    wix, wiy, wiz = s[S_WIE], s[S_WIE + 1], s[S_WIE + 2]
-    wex, wey, wez = s[S_WEN], s[S_WEN + 1], s[S_WEN + 2]
-    zx, zy, zz = (wix + wex) * T, (wiy + wey) * T, (wiz + wez) * T
-
-    # Specific-force transformation ([TW11] 11.3, eq. 11.64) with Savage's
-    # rotation term and the navigation-frame rotation correction -1/2 zeta x u.
-    rc = rotation_compensation(sigma, vsum)
-    bx = vsum[0] + rc[0] + scx
-    by = vsum[1] + rc[1] + scy
-    bz = vsum[2] + rc[2] + scz
-    c = s[S_C : S_C + 9]
-    ux = c[0] * bx + c[1] * by + c[2] * bz
-    uy = c[3] * bx + c[4] * by + c[5] * bz
-    uz = c[6] * bx + c[7] * by + c[8] * bz
+    rcx, rcy, rcz = rotation_compensation(sgx, sgy, sgz, vsx, vsy, vsz)
+    bx = vsx + rcx + scx
+    by = vsy + rcy + scy
+    bz = vsz + rcz + scz
+    c0, c1, c2, c3, c4, c5, c6, c7, c8 = _get9(s, S_C)
+    ux = c0 * bx + c1 * by + c2 * bz
+    uy = c3 * bx + c4 * by + c5 * bz
+    uz = c6 * bx + c7 * by + c8 * bz
     ux, uy, uz = ux - 0.5 * (zy * uz - zz * uy), uy - 0.5 * (zz * ux - zx * uz), uz - 0.5 * (zx * uy - zy * ux)
-    ox, oy, oz = 2.0 * wix + wex, 2.0 * wiy + wey, 2.0 * wiz + wez
-    vnx = vox + ux - (oy * vmz - oz * vmy) * T
-    vny = voy + uy - (oz * vmx - ox * vmz) * T
-    vnz = voz + uz - (ox * vmy - oy * vmx) * T + s[S_G] * T
-    if cfg[CFG_VHOLD] > 0.5:
-        vnz = s[S_VD0]
+    wix, wiy, wiz = s[S_WIE], s[S_WIE + 1], s[S_WIE + 2]
+    ox, oy, oz = 2.0 * wix + s[S_WEN], 2.0 * wiy + s[S_WEN + 1], 2.0 * wiz + s[S_WEN + 2]
+    vnx = s[S_V] + ux - (oy * vmz - oz * vmy) * T
+    vny = s[S_V + 1] + uy - (oz * vmx - ox * vmz) * T
+    vnz = s[S_V + 2] + uz - (ox * vmy - oy * vmx) * T + s[S_G] * T
+    return vnx, vny, vnz
 
-    # Attitude: body update A(sigma), navigation-frame update B = exp(-zeta).
+
+@kernel
+def _attitude_step(s: np.ndarray, cfg: np.ndarray, sgx: float, sgy: float, sgz: float,
+                   zx: float, zy: float, zz: float) -> None:
+    """Step 3, attitude: ``C_b^n(k) = B C_b^n(k-1) A(sigma)``, ``B = exp(-[zeta x])``, or in
+    quaternion form ``q(k) = r(-zeta) (x) q(k-1) (x) r(sigma)`` ([TW11] 11.2.1, 11.2.4)."""
     order = int(cfg[CFG_ORDER])
-    mzeta = np.array([-zx, -zy, -zz])
     if cfg[CFG_DCM] > 0.5:
-        c_old = c.reshape(3, 3)
-        c_new = mat_mul(mat_mul(rotvec_to_dcm(mzeta), c_old), body_update_dcm(sigma, order))
+        c_new = mat3_mul_s(mat3_mul_s(rotvec_to_dcm_s(-zx, -zy, -zz), _get9(s, S_C)),
+                           body_update_dcm(sgx, sgy, sgz, order))
         k = int(cfg[CFG_ORTHO_EVERY])
         if k > 0 and (int(s[S_NK]) + 1) % k == 0:
-            c_new = orthonormalize(c_new)
-        s[S_C : S_C + 9] = c_new.ravel()
-        s[S_Q : S_Q + 4] = dcm_to_quat(c_new)
-    else:
-        q = quat_mul(rotvec_to_quat(mzeta), quat_mul(s[S_Q : S_Q + 4], body_update_quat(sigma, order)))
-        qn = np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-        for a in range(4):
-            s[S_Q + a] = q[a] / qn
-        s[S_C : S_C + 9] = quat_to_dcm(s[S_Q : S_Q + 4]).ravel()
+            c_new = orthonormalize_s(c_new)
+        _put9(s, S_C, c_new)
+        s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3] = dcm_to_quat_s(c_new)
+        return
+    q0, q1, q2, q3 = quat_mul_s(rotvec_to_quat_s(-zx, -zy, -zz),
+                                quat_mul_s((s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]),
+                                           body_update_quat(sgx, sgy, sgz, order)))
+    qn = np.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+    q0, q1, q2, q3 = q0 / qn, q1 / qn, q2 / qn, q3 / qn
+    s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3] = q0, q1, q2, q3
+    _put9(s, S_C, quat_to_dcm_s((q0, q1, q2, q3)))
 
-    # Position ([TW11] 11.4 rectangular / trapezoidal / Simpson).
+
+@kernel
+def _position_step(s: np.ndarray, cfg: np.ndarray, T: float, vnx: float, vny: float, vnz: float) -> None:
+    """Step 4, position: ``C_n^e(k) = C_n^e(k-1) exp([xi x])``, ``xi = w_en^n(v_eff) T``,
+    ``h(k) = h(k-1) - v_D,eff T`` with v_eff from the rectangular, trapezoidal or one-step
+    Simpson (parabolic) rule ([TW11] 11.4). The transport rate's radius coefficients are
+    those of the l cycle at the mid-interval point (1e-12 relative from the
+    effective-velocity midpoint at 100 Hz, below double precision in xi)."""
+    vox, voy, voz = s[S_V], s[S_V + 1], s[S_V + 2]
     rule = int(cfg[CFG_POSINT])
     if rule == 0:
         ex, ey, ez = vox, voy, voz
@@ -374,17 +418,12 @@ def k_update(s: np.ndarray, cfg: np.ndarray) -> None:
         # last interval: (-v(k-2) + 8 v(k-1) + 5 v(k)) / 12. The lecture's
         # printed Simpson line covers two intervals with one-interval weights;
         # see docs/algorithms.md.
-        ex = (-vpx + 8.0 * vox + 5.0 * vnx) / 12.0
-        ey = (-vpy + 8.0 * voy + 5.0 * vny) / 12.0
-        ez = (-vpz + 8.0 * voz + 5.0 * vnz) / 12.0
+        ex = (-s[S_VP] + 8.0 * vox + 5.0 * vnx) / 12.0
+        ey = (-s[S_VP + 1] + 8.0 * voy + 5.0 * vny) / 12.0
+        ez = (-s[S_VP + 2] + 8.0 * voz + 5.0 * vnz) / 12.0
     if cfg[CFG_EARTH] > 0.5:
-        lat, lon, h = position(s, cfg)
-        r_n, r_e = earth.radii(lat)
-        lat_mid = lat + 0.5 * T * ex / (r_n + h)
-        h_mid = h - 0.5 * T * ez
-        xi = earth.transport_rate(lat_mid, h_mid, np.array([ex, ey, ez])) * T
-        cne = mat_mul(s[S_CNE : S_CNE + 9].reshape(3, 3), rotvec_to_dcm(xi))
-        s[S_CNE : S_CNE + 9] = cne.ravel()
+        xn, xe, xd = ey * s[S_KE] * T, -ex * s[S_KN] * T, -ey * s[S_KT] * T
+        _put9(s, S_CNE, mat3_mul_s(_get9(s, S_CNE), rotvec_to_dcm_s(xn, xe, xd)))
     else:
         s[S_PF] += ex * T
         s[S_PF + 1] += ey * T
@@ -394,9 +433,36 @@ def k_update(s: np.ndarray, cfg: np.ndarray) -> None:
         s[S_PF + 2] = 0.0
     else:
         s[S_H] -= ez * T
+    sync_position(s, cfg)
 
-    s[S_VPP], s[S_VPP + 1], s[S_VPP + 2] = vpx, vpy, vpz
-    s[S_VP], s[S_VP + 1], s[S_VP + 2] = vox, voy, voz
+
+@kernel
+def k_update(s: np.ndarray, cfg: np.ndarray) -> None:
+    """One attitude/velocity/position update over the buffered samples (k cycle).
+
+    Increments, l-cycle terms, velocity, attitude, position, in that order; all
+    on scalars, so the update allocates nothing.
+    """
+    n = int(s[S_NJ])
+    T = s[S_BUFT]
+    sgx, sgy, sgz, vsx, vsy, vsz, scx, scy, scz = _body_increments(s, cfg, n)
+    # Mid-interval velocity extrapolated from the last two updates ([TW11] 11.4).
+    vmx = 1.5 * s[S_V] - 0.5 * s[S_VP]
+    vmy = 1.5 * s[S_V + 1] - 0.5 * s[S_VP + 1]
+    vmz = 1.5 * s[S_V + 2] - 0.5 * s[S_VP + 2]
+    if int(s[S_NL]) % int(cfg[CFG_L_EVERY]) == 0:
+        _l_cycle(s, cfg, T, s[S_LATC], s[S_H], vmx, vmy, vmz)
+    s[S_NL] += 1.0
+    zx = (s[S_WIE] + s[S_WEN]) * T
+    zy = (s[S_WIE + 1] + s[S_WEN + 1]) * T
+    zz = (s[S_WIE + 2] + s[S_WEN + 2]) * T
+    vnx, vny, vnz = _velocity_step(s, T, sgx, sgy, sgz, vsx, vsy, vsz, scx, scy, scz, zx, zy, zz, vmx, vmy, vmz)
+    if cfg[CFG_VHOLD] > 0.5:
+        vnz = s[S_VD0]
+    _attitude_step(s, cfg, sgx, sgy, sgz, zx, zy, zz)
+    _position_step(s, cfg, T, vnx, vny, vnz)
+    for a in range(3):
+        s[S_VP + a] = s[S_V + a]
     s[S_V], s[S_V + 1], s[S_V + 2] = vnx, vny, vnz
     s[S_T] = s[S_TJ]
     s[S_NK] += 1.0
@@ -406,9 +472,12 @@ def k_update(s: np.ndarray, cfg: np.ndarray) -> None:
         s[i] = 0.0
 
 
+# --- the j cycle: feeding samples -------------------------------------------
 @kernel
-def push_increment(s: np.ndarray, cfg: np.ndarray, t: float, dtheta: np.ndarray, dv: np.ndarray) -> int:
-    """Feed one increment row covering (t_prev, t] (j cycle).
+def push_increment_s(s: np.ndarray, cfg: np.ndarray, t: float, ax: float, ay: float, az: float,
+                     bx: float, by: float, bz: float) -> int:
+    """Feed one increment row covering (t_prev, t] (j cycle): angle (ax, ay, az) rad and
+    velocity (bx, by, bz) m/s, FRD.
 
     Returns 1 when the sample completed a k cycle (a new solution exists),
     0 when it was buffered, -1 when rejected because t is not after the last
@@ -418,9 +487,10 @@ def push_increment(s: np.ndarray, cfg: np.ndarray, t: float, dtheta: np.ndarray,
     if not dt > 0.0:
         return -1
     j = int(s[S_NJ])
-    for i in range(3):
-        s[S_BTH + 3 * j + i] = dtheta[i]
-        s[S_BDV + 3 * j + i] = dv[i]
+    o = S_BTH + 3 * j
+    s[o], s[o + 1], s[o + 2] = ax, ay, az
+    o = S_BDV + 3 * j
+    s[o], s[o + 1], s[o + 2] = bx, by, bz
     s[S_NJ] = j + 1
     s[S_BUFT] += dt
     s[S_TJ] = t
@@ -431,57 +501,70 @@ def push_increment(s: np.ndarray, cfg: np.ndarray, t: float, dtheta: np.ndarray,
 
 
 @kernel
-def push_rate(s: np.ndarray, cfg: np.ndarray, t: float, w: np.ndarray, f: np.ndarray) -> int:
-    """Feed one rate sample (rad/s, m/s^2 in FRD); same return codes as push_increment.
-
-    Averaged rates: ``dtheta = w dt`` exactly. Instantaneous rates: increments
-    by the trapezoid rule and the piecewise-linear coning/sculling terms of
-    coning.py; a sample at the start time only opens the first interval, and
-    without one the first sample's values hold back to the start (CONVENTIONS.md
-    "Sensor data").
-    """
-    t_last = s[S_TJ]
-    if cfg[CFG_SAMPLED] < 0.5:
-        if not t > t_last:
-            return -1
-        dt = t - t_last
-        return push_increment(s, cfg, t, w * dt, f * dt)
-    if s[S_HAVEP] < 0.5:
-        if t < t_last:
-            return -1
-        s[S_PW : S_PW + 3] = w
-        s[S_PFO : S_PFO + 3] = f
-        s[S_HAVEP] = 1.0
-        if t == t_last:
-            return 0
-    if not t > t_last:
-        return -1
-    h = t - t_last
-    w0 = s[S_PW : S_PW + 3].copy()
-    f0 = s[S_PFO : S_PFO + 3].copy()
-    dth = 0.5 * (w0 + w) * h
-    dvv = 0.5 * (f0 + f) * h
-    acc_a = s[S_ACCA : S_ACCA + 3]
-    acc_v = s[S_ACCV : S_ACCV + 3]
-    s[S_CONE : S_CONE + 3] += 0.5 * cross(acc_a, dth) + rate_coning(w0, w, h)
-    s[S_SCUL : S_SCUL + 3] += 0.5 * (cross(acc_a, dvv) + cross(acc_v, dth)) + rate_sculling(w0, f0, w, f, h)
-    s[S_ACCA : S_ACCA + 3] += dth
-    s[S_ACCV : S_ACCV + 3] += dvv
-    s[S_PW : S_PW + 3] = w
-    s[S_PFO : S_PFO + 3] = f
-    return push_increment(s, cfg, t, dth, dvv)
+def push_increment(s: np.ndarray, cfg: np.ndarray, t: float, dtheta: np.ndarray, dv: np.ndarray) -> int:
+    """:func:`push_increment_s` with the increments as arrays."""
+    return push_increment_s(s, cfg, t, dtheta[0], dtheta[1], dtheta[2], dv[0], dv[1], dv[2])
 
 
 @kernel
 def push_rate_scalars(
     s: np.ndarray, cfg: np.ndarray, t: float, wx: float, wy: float, wz: float, fx: float, fy: float, fz: float
 ) -> int:
-    """:func:`push_rate` with the sample as scalars (cheaper to call from Python, same update)."""
-    w = np.empty(3)
-    f = np.empty(3)
-    w[0], w[1], w[2] = wx, wy, wz
-    f[0], f[1], f[2] = fx, fy, fz
-    return push_rate(s, cfg, t, w, f)
+    """Feed one rate sample (rad/s, m/s^2 in FRD); same return codes as push_increment_s.
+
+    Averaged rates: ``dtheta = w dt`` exactly. Instantaneous rates: increments
+    by the trapezoid rule and the piecewise-linear coning/sculling terms of
+    coning.py, accumulated recursively with ``1/2 alpha x dtheta`` and ``1/2
+    (alpha x dv + v x dtheta)`` (docs/algorithms.md); a sample at the start time
+    only opens the first interval, and without one the first sample's values
+    hold back to the start (CONVENTIONS.md "Sensor data").
+    """
+    t_last = s[S_TJ]
+    if cfg[CFG_SAMPLED] < 0.5:
+        if not t > t_last:
+            return -1
+        dt = t - t_last
+        return push_increment_s(s, cfg, t, wx * dt, wy * dt, wz * dt, fx * dt, fy * dt, fz * dt)
+    if s[S_HAVEP] < 0.5:
+        if t < t_last:
+            return -1
+        s[S_PW], s[S_PW + 1], s[S_PW + 2] = wx, wy, wz
+        s[S_PFO], s[S_PFO + 1], s[S_PFO + 2] = fx, fy, fz
+        s[S_HAVEP] = 1.0
+        if t == t_last:
+            return 0
+    if not t > t_last:
+        return -1
+    h = t - t_last
+    w0x, w0y, w0z = s[S_PW], s[S_PW + 1], s[S_PW + 2]
+    f0x, f0y, f0z = s[S_PFO], s[S_PFO + 1], s[S_PFO + 2]
+    ax, ay, az = 0.5 * (w0x + wx) * h, 0.5 * (w0y + wy) * h, 0.5 * (w0z + wz) * h
+    bx, by, bz = 0.5 * (f0x + fx) * h, 0.5 * (f0y + fy) * h, 0.5 * (f0z + fz) * h
+    aax, aay, aaz = s[S_ACCA], s[S_ACCA + 1], s[S_ACCA + 2]
+    avx, avy, avz = s[S_ACCV], s[S_ACCV + 1], s[S_ACCV + 2]
+    cx, cy, cz = rate_coning(w0x, w0y, w0z, wx, wy, wz, h)
+    s[S_CONE] += 0.5 * (aay * az - aaz * ay) + cx
+    s[S_CONE + 1] += 0.5 * (aaz * ax - aax * az) + cy
+    s[S_CONE + 2] += 0.5 * (aax * ay - aay * ax) + cz
+    ux, uy, uz = rate_sculling(w0x, w0y, w0z, f0x, f0y, f0z, wx, wy, wz, fx, fy, fz, h)
+    s[S_SCUL] += 0.5 * ((aay * bz - aaz * by) + (avy * az - avz * ay)) + ux
+    s[S_SCUL + 1] += 0.5 * ((aaz * bx - aax * bz) + (avz * ax - avx * az)) + uy
+    s[S_SCUL + 2] += 0.5 * ((aax * by - aay * bx) + (avx * ay - avy * ax)) + uz
+    s[S_ACCA] += ax
+    s[S_ACCA + 1] += ay
+    s[S_ACCA + 2] += az
+    s[S_ACCV] += bx
+    s[S_ACCV + 1] += by
+    s[S_ACCV + 2] += bz
+    s[S_PW], s[S_PW + 1], s[S_PW + 2] = wx, wy, wz
+    s[S_PFO], s[S_PFO + 1], s[S_PFO + 2] = fx, fy, fz
+    return push_increment_s(s, cfg, t, ax, ay, az, bx, by, bz)
+
+
+@kernel
+def push_rate(s: np.ndarray, cfg: np.ndarray, t: float, w: np.ndarray, f: np.ndarray) -> int:
+    """:func:`push_rate_scalars` with the sample as arrays."""
+    return push_rate_scalars(s, cfg, t, w[0], w[1], w[2], f[0], f[1], f[2])
 
 
 @kernel
@@ -494,7 +577,8 @@ def run_increments(
     """
     m = 0
     for i in range(t.shape[0]):
-        if push_increment(s, cfg, t[i], dtheta[i], dv[i]) == 1:
+        r = push_increment_s(s, cfg, t[i], dtheta[i, 0], dtheta[i, 1], dtheta[i, 2], dv[i, 0], dv[i, 1], dv[i, 2])
+        if r == 1:
             solution_row(s, cfg, out[m])
             m += 1
     return m
@@ -508,7 +592,7 @@ def run_rates(s: np.ndarray, cfg: np.ndarray, t: np.ndarray, w: np.ndarray, f: n
     for i in range(t.shape[0]):
         if t[i] < t0:
             continue
-        if push_rate(s, cfg, t[i], w[i], f[i]) == 1:
+        if push_rate_scalars(s, cfg, t[i], w[i, 0], w[i, 1], w[i, 2], f[i, 0], f[i, 1], f[i, 2]) == 1:
             solution_row(s, cfg, out[m])
             m += 1
     return m

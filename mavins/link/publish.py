@@ -14,9 +14,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .core import earth
-from .core.rotation import quat_to_dcm
-from .engine import Output
+from ..core.frames import local_ned
+from ..core.records import Solution
+from ..core.rotation import quat_to_dcm
 from .mavlink import mavlink
 
 NAN21 = [float("nan")] * 21
@@ -31,14 +31,7 @@ class PublishConfig:
     estimator_type: int = mavlink.MAV_ESTIMATOR_TYPE_UNKNOWN
 
 
-def local_ned(lat: float, lon: float, h: float, origin: tuple[float, float, float]) -> np.ndarray:
-    """NED offset (m) of a point (rad, rad, m) from the origin (deg, deg, m)."""
-    lat0, lon0, h0 = math.radians(origin[0]), math.radians(origin[1]), origin[2]
-    d = earth.lla_to_ecef(lat, lon, h) - earth.lla_to_ecef(lat0, lon0, h0)
-    return earth.cne_from_latlon(lat0, lon0).T @ d
-
-
-def encode(mav: mavlink.MAVLink, out: Output, cfg: PublishConfig, reset_counter: int = 0) -> list[mavlink.MAVLink_message]:
+def encode(mav: mavlink.MAVLink, out: Solution, cfg: PublishConfig, reset_counter: int = 0) -> list[mavlink.MAVLink_message]:
     """ATTITUDE, ATTITUDE_QUATERNION, LOCAL_POSITION_NED, GLOBAL_POSITION_INT and ODOMETRY."""
     r = out.row
     t = float(r[0])

@@ -14,28 +14,14 @@ import math
 from collections import Counter
 from dataclasses import dataclass, field
 
+from ..core.records import ImuSample
+
 G0 = 9.80665
 MG = G0 / 1000.0  # m/s^2 per milli-g
 HIGHRES_ACC_GYRO = 0b111111  # fields_updated bits 0-5: x/y/z acc and gyro
 HIGHRES_MAG = 0b111000000  # bits 6-8: magnetometer
 
 IMU_MESSAGES = ("HIGHRES_IMU", "RAW_IMU", "SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3")
-
-
-@dataclass(frozen=True)
-class ImuSample:
-    """One IMU sample: sensor time (s), gyro w_ib^b (rad/s), specific force f^b (m/s^2), FRD.
-
-    ``mag`` is the magnetic field in the body frame (gauss) when the message
-    carries one, else None.
-    """
-
-    t: float
-    gyro: tuple[float, float, float]
-    accel: tuple[float, float, float]
-    mag: tuple[float, float, float] | None
-    sysid: int
-    compid: int
 
 
 @dataclass

@@ -227,7 +227,7 @@ class Recorder:
         d = abs(float(np.dot(q_est, q_tru)))
         att = math.degrees(2 * math.acos(min(d, 1.0)))
         lat = math.radians(tr[1])
-        from .core import earth
+        from ..core import earth
 
         r_n, r_e = earth.radii(lat)
         dn = (float(row[1]) - lat) * r_n
@@ -237,7 +237,7 @@ class Recorder:
         self._push("/errors/velocity", t, [float(np.linalg.norm(row[4:7] - tr[4:7]))])
 
     def _log_truth_strip(self, origin: tuple[float, float, float]) -> None:
-        from .publish import local_ned
+        from ..core.frames import local_ned
 
         tr = self._truth  # type: ignore[assignment]
         step = max(1, len(tr) // TRAJ_POINTS)

@@ -12,7 +12,7 @@ Debian packages: ``xvfb`` and ``mesa-vulkan-drivers`` (with ``libvulkan1``);
 
 Command line (until ``mavins review`` exists)::
 
-    python -m mavins.review FILE.rrd --screenshot OUT.png [--size 1600x900] [--timeout 120]
+    python -m mavins.record.review FILE.rrd --screenshot OUT.png [--size 1600x900] [--timeout 120]
 """
 
 from __future__ import annotations
@@ -327,7 +327,7 @@ DESCRIPTION = ("Render a Rerun recording to a PNG with Rerun's native viewer, he
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    """The options of ``mavins review`` (also ``python -m mavins.review``)."""
+    """The options of ``mavins review`` (also ``python -m mavins.record.review``)."""
     p.add_argument("rrd", type=Path, metavar="FILE.rrd", help="recording to render")
     p.add_argument("--screenshot", type=Path, required=True, metavar="OUT.png", help="PNG to write")
     p.add_argument("--size", type=_size, default=(1600, 900), metavar="WxH", help="window size (default 1600x900)")
@@ -354,8 +354,8 @@ def run(args: argparse.Namespace, prog: str) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m mavins.review FILE.rrd --screenshot OUT.png``."""
-    p = argparse.ArgumentParser(prog="python -m mavins.review", description=DESCRIPTION)
+    """``python -m mavins.record.review FILE.rrd --screenshot OUT.png``."""
+    p = argparse.ArgumentParser(prog="python -m mavins.record.review", description=DESCRIPTION)
     add_arguments(p)
     return run(p.parse_args(argv), p.prog)
 

@@ -47,6 +47,7 @@ class Link(Protocol):
     @property
     def dropped(self) -> int: ...
     def authorize(self, addr: object) -> None: ...
+    def take_skipped(self) -> list[bytes]: ...
     def send(self, buf: bytes) -> None: ...
     def close(self) -> None: ...
 
@@ -57,7 +58,8 @@ class PeerPolicy:
 
     timeout: float = 10.0  # s of silence after which a peer stops receiving
     max_peers: int = 8
-    max_lag: float = 0.25  # s: a datagram that waited longer in the kernel is dropped unread
+    max_lag: float = 0.25  # s: under a sustained overload, a datagram that waited longer is skipped
+    stall_grace: float = 2.0  # s of reading late data before a backlog counts as overload, not a stall
 
 
 def _parser() -> mavlink.MAVLink:
@@ -102,10 +104,12 @@ class UdpLink:
                     pass
         self.sock.setblocking(False)
         self.age = 0.0  # s the last datagram read had waited in the kernel
-        self.dropped_late = 0  # datagrams dropped unread: waited over max_lag, or thinned under overload
+        self.dropped_late = 0  # datagrams read but not processed (overload only): skipped late or thinned
         self.kernel_dropped = 0  # datagrams the kernel dropped for a full buffer
         self.thin = 1  # under overload only every thin-th datagram is parsed
+        self.skipped: list[bytes] = []  # raw datagrams read but not processed, for the input log
         self._seen = 0
+        self._late_since: float | None = None  # wall time since which every read found late data
         self.fixed: tuple[str, int] | None = None
         try:
             if self.listen:
@@ -126,16 +130,22 @@ class UdpLink:
     def receive(self, max_datagrams: int) -> tuple[list[tuple[mavlink.MAVLink_message, object]], int]:
         """Messages of up to ``max_datagrams`` waiting datagrams, and how many were read.
 
-        A datagram that waited in the kernel longer than ``max_lag`` is dropped
-        unread, and while the kernel itself drops datagrams (input beyond
-        capacity) only every ``thin``-th one is parsed: what is processed stays
-        current and evenly spread in sensor time, so the output keeps its rate.
+        A one-off stall (start-up, a collection, a slow disk) leaves a backlog in
+        the socket buffer that is read late and processed in full. Only a real
+        overload sheds input: while the kernel drops datagrams (its buffer is
+        full) only every ``thin``-th one is parsed, and once every read for
+        ``stall_grace`` seconds has found data older than ``max_lag`` (the
+        service does not keep up on average) the late ones are skipped. What
+        is processed then stays current and evenly spread in sensor time.
+        Skipped datagrams are kept in ``skipped`` (raw bytes) for the input log.
         """
         out: list[tuple[mavlink.MAVLink_message, object]] = []
         n = 0
         now = time.time()
-        max_lag = self.policy.max_lag
         kernel_before = self.kernel_dropped
+        shed_late = self._overloaded_by_lag(now)
+        max_lag = self.policy.max_lag
+        late_seen = False
         while n < max_datagrams:
             try:
                 data, anc, _, addr = self.sock.recvmsg(MAX_DATAGRAM, 64)
@@ -152,12 +162,12 @@ class UdpLink:
                     self.age = now - (sec + usec * 1e-6)
                 elif kind == SO_RXQ_OVFL and len(value) >= 4:
                     self.kernel_dropped = struct.unpack("I", value[:4])[0]
-            if self.age > max_lag:
-                self.dropped_late += 1
-                continue
+            late = self.age > max_lag
+            late_seen = late_seen or late
             self._seen += 1
-            if self.thin > 1 and self._seen % self.thin:
+            if (late and shed_late) or (self.thin > 1 and self._seen % self.thin):
                 self.dropped_late += 1
+                self.skipped.append(data)
                 continue
             msgs = self.parser.parse_buffer(data) or []
             out.extend((m, addr) for m in msgs)
@@ -166,8 +176,19 @@ class UdpLink:
                 reason = "truncated frame" if msgs or self.parser.buf_len() > 0 else "no frame in datagram"
                 out.append((mavlink.MAVLink_bad_data(bytearray(data[:64]), reason), addr))
                 _reset(self.parser)
+        if n:
+            self._late_since = (self._late_since or now) if late_seen else None
         self._adapt_thinning(kernel_before, n, max_datagrams)
         return out, n
+
+    def _overloaded_by_lag(self, now: float) -> bool:
+        """True once every read for ``stall_grace`` seconds has found late data."""
+        return self._late_since is not None and now - self._late_since > self.policy.stall_grace
+
+    def take_skipped(self) -> list[bytes]:
+        """Raw datagrams read but not processed since the last call."""
+        out, self.skipped = self.skipped, []
+        return out
 
     def _adapt_thinning(self, kernel_before: int, n: int, max_datagrams: int) -> None:
         """Thin uniformly while the kernel is dropping (true overload), so the datagrams that are
@@ -179,7 +200,7 @@ class UdpLink:
 
     @property
     def dropped(self) -> int:
-        """Input lost for lack of capacity: shed late by us plus dropped by the kernel."""
+        """Input not processed for lack of capacity: skipped by us plus dropped by the kernel."""
         return self.dropped_late + self.kernel_dropped
 
     def authorize(self, addr: object) -> None:
@@ -225,6 +246,11 @@ class MavutilLink:
         self.parser = _parser()
         self.age = 0.0
         self.dropped = 0
+        self.dropped_late = 0
+        self.kernel_dropped = 0
+
+    def take_skipped(self) -> list[bytes]:
+        return []
 
     def fileno(self) -> int | None:
         fd = getattr(self.conn, "fd", None)

@@ -1,0 +1,1 @@
+"""The MAVLink boundary: links, signing, ingest of IMU messages, publishing of solutions."""

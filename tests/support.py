@@ -1,0 +1,167 @@
+"""What several test modules share: the mavins command, its environment, ports and log waits."""
+
+from __future__ import annotations
+
+import os
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+MAVINS = [str(Path(sys.executable).parent / "mavins")] if (Path(sys.executable).parent / "mavins").is_file() \
+    else [sys.executable, "-m", "mavins.cli"]
+ENV = {**os.environ, "MAVLINK20": "1", "PYTHONUNBUFFERED": "1"}
+READY_TIMEOUT_S = 600.0  # a cold start compiles the kernels; on a loaded machine that takes a while
+
+
+def free_udp_port() -> int:
+    """A UDP port on 127.0.0.1 that is free right now."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def wait_for_line(path: Path, text: str, proc: subprocess.Popen, timeout: float = READY_TIMEOUT_S) -> None:
+    """Wait until ``text`` appears in a process's log file; fail if the process exits first."""
+    t_end = time.monotonic() + timeout
+    while time.monotonic() < t_end:
+        if text in path.read_text(errors="replace"):
+            return
+        if proc.poll() is not None:
+            raise AssertionError(f"exited ({proc.returncode}) before {text!r}:\n{path.read_text()}")
+        time.sleep(0.05)
+    raise AssertionError(f"no {text!r} within {timeout} s:\n{path.read_text()}")
+
+
+def mavins(*args: str, cwd: Path, env: dict[str, str] | None = None,
+           timeout: float = 600.0) -> subprocess.CompletedProcess:
+    """Run ``mavins ARGS`` to completion, capturing its output."""
+    return subprocess.run([*MAVINS, *args], cwd=cwd, env=env or ENV, capture_output=True, text=True,
+                          timeout=timeout)
+
+
+def summary(log: str) -> dict[str, str]:
+    """The ``mavins run: key: value`` lines of a service's exit summary."""
+    out: dict[str, str] = {}
+    for line in log.splitlines():
+        if line.startswith("mavins run: ") and ": " in line[len("mavins run: "):]:
+            k, v = line[len("mavins run: "):].split(": ", 1)
+            out[k] = v
+    return out
+
+
+# -- events, not durations ------------------------------------------------------------------------
+EVENT_TIMEOUT_S = 180.0  # generous: a wait only fails when the event never comes, never because the machine is busy
+
+
+def wait_until(cond, what: str, timeout: float = EVENT_TIMEOUT_S, poll: float = 0.02):  # type: ignore[no-untyped-def]
+    """Poll ``cond()`` until it returns something truthy and return that; fail after ``timeout`` s."""
+    t_end = time.monotonic() + timeout
+    while True:
+        v = cond()
+        if v:
+            return v
+        if time.monotonic() > t_end:
+            raise AssertionError(f"{what}: not within {timeout:g} s")
+        time.sleep(poll)
+
+
+# -- UDP sockets as the kernel sees them -----------------------------------------------------------
+SO_TIMESTAMP = getattr(socket, "SO_TIMESTAMP", 29)
+SO_RCVBUFFORCE = getattr(socket, "SO_RCVBUFFORCE", 33)
+TEST_RCVBUF = 64 << 20  # what the test's own receivers ask for, so that they lose nothing while busy
+ROOM_BYTES = 64 << 10  # backpressure: queued bytes a sender leaves in a receiver's socket (any buffer holds 200 KiB)
+
+
+def roomy(sock: socket.socket, size: int = TEST_RCVBUF) -> socket.socket:
+    """Give a test's receiving socket a large buffer (beyond rmem_max where permitted) and kernel stamps."""
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, SO_RCVBUFFORCE, size)
+    except OSError:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, size)  # capped at net.core.rmem_max
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMP, 1)
+    except OSError:
+        pass
+    return sock
+
+
+def udp_stats(port: int) -> tuple[int, int] | None:
+    """(bytes queued, datagrams dropped by the kernel) of the UDP socket bound to 127.0.0.1:port (/proc/net/udp)."""
+    want = f"0100007F:{port:04X}"
+    try:
+        with open("/proc/net/udp", encoding="ascii") as fh:
+            next(fh)
+            for line in fh:
+                f = line.split()
+                if f[1] == want:
+                    return int(f[4].split(":")[1], 16), int(f[-1])
+    except (OSError, StopIteration):
+        return None
+    return None
+
+
+def kernel_drops(port: int) -> int:
+    """Datagrams the kernel dropped at the socket on 127.0.0.1:port (full buffer); 0 if unknown."""
+    st = udp_stats(port)
+    return st[1] if st else 0
+
+
+def wait_until_read(port: int, proc: subprocess.Popen | None = None, timeout: float = EVENT_TIMEOUT_S) -> float:
+    """Wait until the socket on 127.0.0.1:port holds nothing unread; return the wall time (time.time()) seen."""
+    def empty() -> float | None:
+        if proc is not None and proc.poll() is not None:
+            raise AssertionError(f"exited ({proc.returncode}) with input unread on port {port}")
+        st = udp_stats(port)
+        return time.time() if st is None or st[0] == 0 else None
+
+    return float(wait_until(empty, f"everything sent to port {port} read", timeout))
+
+
+def wait_for_room(port: int, limit: int = ROOM_BYTES) -> None:
+    """Backpressure for a test's sender: wait while the receiver on port has more than ``limit`` bytes unread.
+
+    A test that must deliver every datagram paces its sender with this, so a busy
+    machine slows the test down instead of overflowing the receiver's buffer.
+    """
+    wait_until(lambda: (udp_stats(port) or (0, 0))[0] <= limit, f"receiver on port {port} reading", poll=0.002)
+
+
+def softnet_dropped() -> int:
+    """Packets the kernel dropped machine-wide before any socket (backlog full; /proc/net/softnet_stat)."""
+    try:
+        with open("/proc/net/softnet_stat", encoding="ascii") as fh:
+            return sum(int(line.split()[1], 16) for line in fh if line.strip())
+    except (OSError, IndexError, ValueError):
+        return 0
+
+
+def recv_stamped(sock: socket.socket) -> list[tuple[float, bytes]]:
+    """Every datagram waiting in ``sock`` with its kernel receive time (time.time() scale; needs ``roomy``)."""
+    import struct
+
+    out = []
+    while True:
+        try:
+            data, anc, _, _ = sock.recvmsg(65535, 64, socket.MSG_DONTWAIT)
+        except (BlockingIOError, InterruptedError):
+            return out
+        stamp = time.time()
+        for level, kind, value in anc:
+            if level == socket.SOL_SOCKET and kind == SO_TIMESTAMP and len(value) >= 16:
+                sec, usec = struct.unpack("qq", value[:16])
+                stamp = sec + usec * 1e-6
+        out.append((stamp, data))
+
+
+def tlog_frames(path: Path) -> int:
+    """MAVLink 2 frames in a tlog (each record: 8-byte big-endian microseconds, then one frame)."""
+    data, n, i = path.read_bytes(), 0, 0
+    while i + 8 < len(data):
+        assert data[i + 8] == 0xFD, f"not a MAVLink 2 frame at byte {i + 8}"
+        i += 8 + 12 + data[i + 9] + (13 if data[i + 10] & 1 else 0)
+        n += 1
+    assert i == len(data), "the tlog ends inside a frame"
+    return n
