@@ -44,7 +44,7 @@ for _p in (str(HERE), str(ROOT)):
 N_SAMPLES = 1_000_000
 RATE_HZ = 100.0
 SEED = 20250101
-#: Initial state of the record (degrees, m, m/s), CONVENTIONS.md "Initial state".
+#: Initial state of the record (degrees, m, m/s), docs/conventions.md "Initial state".
 INIT = {
     "t": 0.0,
     "lat": 45.0,

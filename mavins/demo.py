@@ -20,7 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .core import earth
+from .core.frames import north_east_error
+from .core.rotation import euler_to_quat, quat_angle_rows
 from .engine import EngineConfig
 from .link.ingest import IngestConfig
 from .link.mavlink import mavutil
@@ -102,26 +103,18 @@ def compare(collected: Collected, truth: np.ndarray) -> tuple[float, float, floa
     idx = np.searchsorted(ms_truth, att[:, 0].astype(np.int64))
     ok = idx < len(truth)
     att, idx = att[ok], idx[ok]
-    d = []
-    for (_, r, p, y), i in zip(att, idx):
-        tr = np.radians(truth[i, 7:10])
-        d.append(max(abs(_wrap(r - tr[0])), abs(_wrap(p - tr[1])), abs(_wrap(y - tr[2]))))
-    d_deg = np.degrees(np.array(d)) if d else np.array([math.nan])
+    q_pub = np.array([euler_to_quat(r, p, y) for _, r, p, y in att]).reshape(-1, 4)
+    d = quat_angle_rows(q_pub, np.ascontiguousarray(truth[idx, 10:14])) if len(att) else np.array([math.nan])
+    d_deg = np.degrees(d)
     pos_err = vel_err = math.nan
     if collected.global_pos:
         g = collected.global_pos[-1]
         i = min(int(np.searchsorted(ms_truth, g[0])), len(truth) - 1)
-        lat, lon = math.radians(g[1] * 1e-7), math.radians(g[2] * 1e-7)
-        r_n, r_e = earth.radii(lat)
-        dn = (lat - math.radians(truth[i, 1])) * r_n
-        de = (lon - math.radians(truth[i, 2])) * r_e * math.cos(lat)
+        dn, de = north_east_error(math.radians(g[1] * 1e-7), math.radians(g[2] * 1e-7),
+                                  math.radians(truth[i, 1]), math.radians(truth[i, 2]))
         pos_err = math.hypot(dn, de)
         vel_err = float(np.linalg.norm(np.array(g[4:7]) / 100.0 - truth[i, 4:7]))
     return float(np.nanmax(d_deg)), float(d_deg[-1]), pos_err, vel_err
-
-
-def _wrap(a: float) -> float:
-    return (a + math.pi) % (2 * math.pi) - math.pi
 
 
 def run_demo(

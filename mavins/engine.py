@@ -34,7 +34,7 @@ MAX_SPEED = 1.0e4  # m/s: likewise
 
 @dataclass
 class EngineConfig:
-    """Navigation settings (CONVENTIONS.md ``mavins run``); angles in degrees."""
+    """Navigation settings (docs/conventions.md ``mavins run``); angles in degrees."""
 
     lat: float | None = None
     lon: float | None = None
@@ -247,7 +247,7 @@ class Engine:
         return Solution(self._row.copy(), np.array(self._gyro_last), self._pos, self.degraded)  # type: ignore[arg-type]
 
     def _output_due(self, t: float) -> bool:
-        """One output set each time sensor time crosses a multiple of 1/rate (CONVENTIONS.md
+        """One output set each time sensor time crosses a multiple of 1/rate (docs/conventions.md
         ``--rate``): on the first attitude update at or after it. An update interval that
         spans two multiples (rate close to the update rate, jittery times) yields one set."""
         k = math.floor(t * self.cfg.rate + 1e-9)

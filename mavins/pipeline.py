@@ -17,6 +17,7 @@ from .core.frames import local_ned
 from .core.records import ImuSample, Solution
 from .engine import Engine, EngineConfig
 from .link.ingest import IMU_MESSAGES, Ingest, IngestConfig
+from .record.sink import Sink
 
 log = logging.getLogger("mavins")
 
@@ -34,7 +35,7 @@ class Pipeline:
     ingest: Ingest = field(init=False)
     counters: Counter = field(default_factory=Counter)
     last_sample: ImuSample | None = None
-    recorder: object | None = None
+    recorder: Sink | None = None
     _outputs: int = 0
 
     def __post_init__(self) -> None:
@@ -84,25 +85,25 @@ class Pipeline:
         out = self.engine.on_imu(smp)
         rec = self.recorder
         if rec is not None:
-            rec.on_sample(smp.t, smp.gyro, smp.accel)  # type: ignore[attr-defined]
+            rec.on_sample(smp.t, smp.gyro, smp.accel)
             if out is not None:
                 r = out.row
-                rec.on_output(r, out.origin, local_ned(float(r[1]), float(r[2]), float(r[3]), out.origin))  # type: ignore[attr-defined]
+                rec.on_output(r, out.origin, local_ned(float(r[1]), float(r[2]), float(r[3]), out.origin))
                 self._outputs += 1
                 if self._outputs % 50 == 1:
                     counts = {f"rejected_{k}": v for k, v in self.ingest.rejected.items()}
                     counts.update({k: v for k, v in self.engine.counters.items() if v})
                     if counts:
-                        rec.on_counters(float(r[0]), counts)  # type: ignore[attr-defined]
+                        rec.on_counters(float(r[0]), counts)
         return out
 
     def take_events(self) -> list[tuple[str, str]]:
-        """State changes and warnings since the last call (also sent to the recorder)."""
+        """State changes and warnings since the last call, drained once (also sent to the recorder)."""
         events = self.engine.take_events()
         if self.recorder is not None:
             t = self.last_sample.t if self.last_sample is not None else None
             for level, text in events:
-                self.recorder.on_event(t, level, text)  # type: ignore[attr-defined]
+                self.recorder.on_event(t, level, text)
         return events
 
 

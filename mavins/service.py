@@ -32,6 +32,7 @@ from .link.ingest import IMU_MESSAGES, IngestConfig
 from .link.links import Link, PeerPolicy, open_link
 from .link.mavlink import mavlink
 from .pipeline import Pipeline
+from .record.sink import GuardedSink, Sink
 from .link.signing import Signer, Verifier
 
 log = logging.getLogger("mavins")
@@ -141,9 +142,10 @@ class Service:
         self._pending_text: list[tuple[str, str]] = []
 
     # -- optional parts ----------------------------------------------------------
-    def attach_recorder(self, recorder: object) -> None:
-        """Record every sample, output and event to Rerun (closed with the service)."""
-        self.pipeline.recorder = recorder
+    def attach_recorder(self, recorder: Sink) -> None:
+        """Record every sample, output and event (closed with the service). A recorder that
+        fails is switched off and the failure logged; navigation goes on."""
+        self.pipeline.recorder = GuardedSink(recorder, lambda exc: self._optional_failed("recording", exc))
 
     def _optional_failed(self, part: str, exc: BaseException) -> None:
         self.counters[f"{part}_failed"] += 1
@@ -167,12 +169,7 @@ class Service:
                     log.debug("send to %s failed: %s", link.url, exc)
 
     def _announce(self) -> None:
-        try:
-            events = self.pipeline.take_events()
-        except Exception as exc:  # the recorder may fail inside take_events
-            self.pipeline.recorder = None
-            self._optional_failed("recording", exc)
-            events = self.pipeline.engine.take_events()
+        events = self.pipeline.take_events()
         for level, text in events:
             log.log(logging.WARNING if level == "WARNING" else logging.INFO, text)
             self._text_id += 1
@@ -207,15 +204,7 @@ class Service:
             except OSError as exc:
                 self._tlog = None
                 self._optional_failed("tlog", exc)
-        try:
-            out = self.pipeline.handle(msg)
-        except Exception as exc:
-            if self.pipeline.recorder is None:
-                raise
-            # only the recorder runs optional code inside the pipeline
-            self.pipeline.recorder = None
-            self._optional_failed("recording", exc)
-            out = None
+        out = self.pipeline.handle(msg)
         if not self._sysid_known:
             vehicle = self.pipeline.vehicle_sysid
             if vehicle is None and name == "HEARTBEAT" and msg.autopilot != mavlink.MAV_AUTOPILOT_INVALID \
@@ -240,12 +229,7 @@ class Service:
             rec = self.pipeline.recorder
             if rec is not None:
                 # from the datagrams' arrival in the kernel to this output set sent
-                latency = time.time() - self._batch_time + self._batch_age
-                try:
-                    rec.on_latency(float(out.row[0]), 1e3 * latency)  # type: ignore[attr-defined]
-                except Exception as exc:
-                    self.pipeline.recorder = None
-                    self._optional_failed("recording", exc)
+                rec.on_latency(float(out.row[0]), 1e3 * (time.time() - self._batch_time + self._batch_age))
             if self._solution is not None:
                 self._solution.write(out.row)
 
@@ -342,6 +326,7 @@ class Service:
     def close(self) -> None:
         """Flush and close the tlog, the solution file, the recording and the links."""
         self._log_skipped()
+        self._announce()
         if self._tlog is not None:
             self._tlog.close()
             self._tlog = None
@@ -354,11 +339,7 @@ class Service:
             except OSError:
                 pass
         if self.pipeline.recorder is not None:
-            try:
-                self.pipeline.take_events()
-                self.pipeline.recorder.close()  # type: ignore[attr-defined]
-            except Exception as exc:  # a recording failure must never take navigation down
-                self._optional_failed("recording", exc)
+            self.pipeline.recorder.close()
             self.pipeline.recorder = None
         c = dict(self.counters)
         c["flood_dropped"] = self._flood_dropped()

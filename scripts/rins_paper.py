@@ -2,7 +2,7 @@
 
 [LAI12] Lai, Lü, Zhang, Liu, "Coning error analysis and compensation in
 rotation inertial navigation system", J. Nanjing Univ. Aeronautics &
-Astronautics 44(2), 2012 (references/rins-coning-error-paper.md).
+Astronautics 44(2), 2012, pp. 159-164.
 
 Every **measured** number comes from running mavins' strapdown
 (:func:`mavins.core.runner.navigate`, ``earth_model="none"``, exact-order
@@ -473,7 +473,7 @@ def report(f12, f3, f4, traj, usec, paths, output: Path, elapsed: float, dur12: 
       "script, independent of the code under test.\n")
     w("[LAI12]: Lai Jizhou, Lü Pin, Zhang Ling, Liu Jianye, \"Coning error analysis and compensation in rotation "
       "inertial navigation system\" (旋转惯导系统中的圆锥误差分析及其补偿), J. Nanjing Univ. Aeronautics & Astronautics "
-      "44(2), 2012, pp. 159-164; text in references/rins-coning-error-paper.md.\n")
+      "44(2), 2012, pp. 159-164.\n")
     w(f"- date of run: {_dt.datetime.now(_dt.timezone.utc).strftime('%Y-%m-%d %H:%M:%S')} UTC")
     w(f"- machine: {platform.machine()}, {platform.system()} {platform.release()}")
     w(f"- Python {platform.python_version()}, NumPy {np.__version__}, Numba {numba.__version__}")
@@ -742,7 +742,7 @@ def report(f12, f3, f4, traj, usec, paths, output: Path, elapsed: float, dur12: 
       "has no (ωrT)³ term and no α²(ωrT)(ωcT)² term; its rotation part is r_N α²(ωrT)(ωcT)⁴ "
       f"(here {g(rotation_rate(4, WR) * DEG_H)} deg/h at N = 4 instead of eq. (18)'s "
       f"{g(-sum(rins.eq18_terms(4, ALPHA, WC, WR, T)[:2]) / T * DEG_H)}).")
-    w("2. **Eq. (18)'s coning term needs the sample interval h = T/N, not T** (as references/README.md states): "
+    w("2. **Eq. (18)'s coning term needs the sample interval h = T/N, not T**: "
       "with h it is the classic N-sample residual and matches the runs for N = 2 (and N = 3 on a fixed IMU); "
       "printed with T it is N^(2N+1) times too large (×32 at N = 2, ×2187 at N = 3). Eq. (13) defines "
       "λ1 = ωr h/2 + ωc h and (16) λ2 = ωc h, so the h was lost between (16) and (18).")

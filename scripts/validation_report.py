@@ -4,7 +4,7 @@ Every "measured" number below comes from running
 :func:`mavins.core.runner.navigate` on the exact IMU increments of
 :mod:`sim.motion`; every "theory" number comes from a closed form evaluated
 here, independently of the code under test (the N-sample coefficients are
-re-typed from CONVENTIONS.md as exact fractions). The derivations are the
+re-typed from docs/conventions.md as exact fractions). The derivations are the
 ones of tests/test_strapdown_closed_form.py and are summarised in the report.
 
 Run from the repository root::
@@ -40,7 +40,7 @@ from sim import motion  # noqa: E402
 
 DEG_H = math.degrees(1.0) * 3600.0  # rad/s -> deg/h
 
-#: N-sample coning/sculling coefficients, oldest sample first (CONVENTIONS.md ``--samples``).
+#: N-sample coning/sculling coefficients, oldest sample first (docs/conventions.md ``--samples``).
 COEFFS: dict[int, tuple[Fraction, ...]] = {
     1: (),
     2: (Fraction(2, 3),),
@@ -56,7 +56,7 @@ COEFFS: dict[int, tuple[Fraction, ...]] = {
     ),
 }
 
-#: Truncated body-update coefficients of [TW11] 11.2.1 / CONVENTIONS.md ``--order``.
+#: Truncated body-update coefficients of [TW11] 11.2.1 / docs/conventions.md ``--order``.
 DCM_A: dict[int, Callable[[float], tuple[float, float]]] = {
     1: lambda s: (1.0, 0.0),
     2: lambda s: (1.0, 0.5),
@@ -279,7 +279,7 @@ def section_table_11_2() -> str:
             "",
             f"How measured: as table 11.1 with `attitude='quaternion'` (normalised every update). "
             "Closed form: (2 atan2(a_s σ, a_c) − σ)/δt for r = [a_c, a_s σ] "
-            "(coefficients of CONVENTIONS.md `--order`).",
+            "(coefficients of docs/conventions.md `--order`).",
             "",
             f"**The printed orders 3 and 4 disagree with the formula.** The table prints 0.4 / 0.2 deg/h "
             f"at σ = 0.1 and 0.06 / 0.06 at σ = 0.05; the closed form gives {fmt(d3, 3)} / {fmt(d4, 3)} "

@@ -2,7 +2,7 @@
 
 [LAI12] "Coning error analysis and compensation in rotation inertial
 navigation system" (J. Nanjing Univ. Aeronautics & Astronautics 44(2)),
-eqs. 1-18; text in references/rins-coning-error-paper.md.
+eqs. 1-18.
 
 Motion model (the paper's, eq. 2): the body frame b cones about the z axis of
 a non-rotating reference frame r with half-angle alpha and, on a turntable,
@@ -201,7 +201,7 @@ def paper_motion(alpha: float, wc: float, turntable: float | Schedule, dt: float
 # --- closed forms of the error analysis ------------------------------------------
 
 #: N-sample coning coefficients k_{N-1}, ..., k_1 for dtheta_1 ... dtheta_{N-1}
-#: (oldest first), re-typed as exact fractions (CONVENTIONS.md ``--samples``;
+#: (oldest first), re-typed as exact fractions (docs/conventions.md ``--samples``;
 #: Lee, Yoon, Lee 1990; the paper's eq. 14 takes them from the non-rotating INS).
 CONING_COEFFS: dict[int, tuple[Fraction, ...]] = {
     1: (),

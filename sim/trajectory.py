@@ -464,7 +464,7 @@ def simulate(
     if spec.use_earth:
         lat, lon = pos[:, 0], pos[:, 1]
     else:
-        # flat NED offsets through the start point's radii (CONVENTIONS.md earth = none)
+        # flat NED offsets through the start point's radii (docs/conventions.md earth = none)
         r_n, r_e = earth.radii(spec.lat)
         lat = spec.lat + pos[:, 0] / (r_n + spec.h)
         lon = spec.lon + pos[:, 1] / ((r_e + spec.h) * math.cos(spec.lat))

@@ -45,11 +45,3 @@ def mag_heading(m_mean: np.ndarray, roll: float, pitch: float, declination: floa
     """Heading (rad) from the levelled magnetic field plus declination (rad, east positive)."""
     m = _levelled(m_mean, roll, pitch)
     return math.atan2(-m[1], m[0]) + declination
-
-
-def wrap(angle: float) -> float:
-    """Angle in (-pi, pi]."""
-    a = math.fmod(angle + math.pi, 2 * math.pi)
-    if a <= 0:
-        a += 2 * math.pi
-    return a - math.pi

@@ -4,7 +4,7 @@ Two families, chosen by what the sensor delivers:
 
 * **Increments** (or interval-averaged rates, which are increments divided by
   the interval): the N-sample algorithms ``dphi = [sum_{i<N} k_{N-i} dtheta_i]
-  x dtheta_N`` with the optimal coefficients of CONVENTIONS.md ``--samples``
+  x dtheta_N`` with the optimal coefficients of docs/conventions.md ``--samples``
   (Lee, Yoon et al. 1990; Ignagni 1996). Sculling uses the same coefficients
   (Ignagni 1998, "duality of optimal sculling and coning algorithms"):
   ``dv_scul = sum_{i<N} k_{N-i} (dtheta_i x dv_N + dv_i x dtheta_N)``.
@@ -25,7 +25,7 @@ import numpy as np
 from .jit import kernel
 
 #: ``CONING_COEFFS[N, :N-1]`` are the N-sample coefficients, oldest sample first
-#: (CONVENTIONS.md ``--samples``). Row 1 (and row 0) are unused.
+#: (docs/conventions.md ``--samples``). Row 1 (and row 0) are unused.
 CONING_COEFFS = np.zeros((7, 5))
 CONING_COEFFS[2, :1] = [2.0 / 3.0]
 CONING_COEFFS[3, :2] = [9.0 / 20.0, 27.0 / 20.0]
@@ -93,7 +93,7 @@ def rotation_compensation(px: float, py: float, pz: float, dvx: float, dvy: floa
     """Savage's closed-form rotation term of the velocity increment (m/s).
 
     ``(1 - cos p)/p^2 (phi x dv) + (1 - sin(p)/p)/p^2 phi x (phi x dv)``,
-    ``p = |phi|`` (CONVENTIONS.md ``--samples``; Savage, Strapdown Analytics
+    ``p = |phi|`` (docs/conventions.md ``--samples``; Savage, Strapdown Analytics
     section 7.2.2.2). Its first term is the ``1/2 alpha x v`` rotation
     correction of [TW11] 11.3.
     """

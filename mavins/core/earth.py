@@ -1,4 +1,4 @@
-"""WGS-84 Earth model exactly as CONVENTIONS.md "Earth model" fixes it.
+"""WGS-84 Earth model exactly as docs/conventions.md "Earth model" fixes it.
 
 Navigation frame n is local North-East-Down. Position is carried as the DCM
 ``C_n^e`` (n to Earth-fixed e) plus ellipsoidal height h, so that the
@@ -27,7 +27,7 @@ def radii(lat: float) -> tuple[float, float]:
     """Meridian and prime-vertical radii ``(R_N, R_E)`` (m) at latitude (rad).
 
     ``R_N = a(1-e^2)/(1-e^2 sin^2 L)^1.5``, ``R_E = a/(1-e^2 sin^2 L)^0.5``
-    (CONVENTIONS.md "Radii"; WGS-84, NIMA TR8350.2).
+    (docs/conventions.md "Radii"; WGS-84, NIMA TR8350.2).
     """
     return radii_sin(np.sin(lat))
 
@@ -46,7 +46,7 @@ def gravity(lat: float, h: float) -> float:
 
     Somigliana ``gamma = gamma_e (1 + k sin^2 L)/sqrt(1 - e^2 sin^2 L)`` with
     the height term ``gamma_h = gamma [1 - 2/a (1 + f + m - 2 f sin^2 L) h
-    + 3 h^2/a^2]`` (CONVENTIONS.md "Gravity"; plumb-bob gravity, centrifugal
+    + 3 h^2/a^2]`` (docs/conventions.md "Gravity"; plumb-bob gravity, centrifugal
     term included, [ZS1] ch. 1 gravity/gravitation relation).
     """
     sl = np.sin(lat)
@@ -96,7 +96,7 @@ def nav_terms(lat: float, h: float) -> tuple[float, float, float, float, float, 
 def transport_rate(lat: float, h: float, v: np.ndarray) -> np.ndarray:
     """Transport rate ``w_en^n = [v_E/(R_E+h), -v_N/(R_N+h), -v_E tan L/(R_E+h)]``.
 
-    [TW11] 11.4 component form with the ellipsoid radii of CONVENTIONS.md.
+    [TW11] 11.4 component form with the ellipsoid radii of docs/conventions.md.
     The down component is the NED frame's own pole singularity (tan L); the
     position DCM ``C_n^e`` stays regular.
     """

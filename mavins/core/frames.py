@@ -19,3 +19,10 @@ def local_ned(lat: float, lon: float, h: float, origin: tuple[float, float, floa
     lat0, lon0, h0 = math.radians(origin[0]), math.radians(origin[1]), origin[2]
     d = earth.lla_to_ecef(lat, lon, h) - earth.lla_to_ecef(lat0, lon0, h0)
     return earth.cne_from_latlon(lat0, lon0).T @ d
+
+
+def north_east_error(lat: float, lon: float, lat_ref: float, lon_ref: float) -> tuple[float, float]:
+    """North and east offset (m) of (lat, lon) from (lat_ref, lon_ref), all rad, through the
+    reference point's radii (small offsets: metres to kilometres)."""
+    r_n, r_e = earth.radii(lat_ref)
+    return (lat - lat_ref) * r_n, (lon - lon_ref) * r_e * math.cos(lat_ref)

@@ -1,6 +1,6 @@
 """Attitude representations and their conversions (pure, compiled).
 
-Conventions (CONVENTIONS.md "Frames and attitude"):
+Conventions (docs/conventions.md "Frames and attitude"):
 - quaternions are Hamilton, scalar first ``[w, x, y, z]``; ``q_nb`` maps body
   vectors to the navigation frame, ``v_n = C(q) v_b``;
 - a DCM is a 3x3 array ``C`` with the same meaning (``C = C_b^n``);
@@ -91,7 +91,7 @@ def mat_vec(a: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 @kernel
 def quat_mul(p: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """Hamilton product ``p (x) q`` (Savage, Strapdown Analytics, quaternion algebra; Hamilton convention of CONVENTIONS.md)."""
+    """Hamilton product ``p (x) q`` (Savage, Strapdown Analytics, quaternion algebra; Hamilton convention of docs/conventions.md)."""
     return _vec4(quat_mul_s((p[0], p[1], p[2], p[3]), (q[0], q[1], q[2], q[3])))
 
 
@@ -221,7 +221,7 @@ def wrap_pi(a: float) -> float:
 def dcm_to_euler(c: np.ndarray) -> np.ndarray:
     """``[roll, pitch, yaw]`` (rad) of ``C_b^n``; roll, yaw in (-pi, pi].
 
-    Inverse of :func:`euler_to_dcm` (CONVENTIONS.md Euler ranges). At pitch = +-90 deg
+    Inverse of :func:`euler_to_dcm` (docs/conventions.md Euler ranges). At pitch = +-90 deg
     roll and yaw are not separable; roll is then set to 0.
     """
     r, p, y = dcm_to_euler_s(c[0, 0], c[0, 1], c[1, 0], c[1, 1], c[2, 0], c[2, 1], c[2, 2])
@@ -278,7 +278,7 @@ def quat_to_euler(q: np.ndarray) -> np.ndarray:
 def rotvec_to_quat(phi: np.ndarray) -> np.ndarray:
     """Exact ``exp(phi)`` as a quaternion ``[cos(s/2), sin(s/2)/s phi]``.
 
-    Bortz 1971; the exact form of the truncated series in CONVENTIONS.md ``--order``.
+    Bortz 1971; the exact form of the truncated series in docs/conventions.md ``--order``.
     """
     return _vec4(rotvec_to_quat_s(phi[0], phi[1], phi[2]))
 
@@ -447,3 +447,12 @@ def quat_angle_between(p: np.ndarray, q: np.ndarray) -> float:
     e = quat_mul(quat_conj(p), q)
     v = np.sqrt(e[1] * e[1] + e[2] * e[2] + e[3] * e[3])
     return 2.0 * np.arctan2(v, abs(e[0]))
+
+
+@kernel
+def quat_angle_rows(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """:func:`quat_angle_between` of each row pair of two (n, 4) arrays (rad): the attitude error."""
+    out = np.empty(p.shape[0])
+    for i in range(p.shape[0]):
+        out[i] = quat_angle_between(p[i], q[i])
+    return out

@@ -263,7 +263,7 @@ def body_update_quat(x: float, y: float, z: float, order: int) -> Quat:
     ``r = [a_c, a_s sigma]`` with ``(a_c, a_s)`` = (1, 1/2), (1 - s^2/8, 1/2),
     (1 - s^2/8, 1/2 - s^2/48), (1 - s^2/8 + s^4/384, 1/2 - s^2/48) for orders
     1..4 and the exact ``(cos s/2, sin(s/2)/s)`` for order 0 ([TW11] 11.2.1
-    quaternion error analysis and table 11.2; CONVENTIONS.md ``--order``).
+    quaternion error analysis and table 11.2; docs/conventions.md ``--order``).
     """
     if order == 0:
         return rotvec_to_quat_s(x, y, z)
@@ -285,7 +285,7 @@ def body_update_dcm(x: float, y: float, z: float, order: int) -> Mat9:
 
     ``(a1, a2)`` = (1, 0), (1, 1/2), (1 - s^2/6, 1/2), (1 - s^2/6, 1/2 - s^2/24)
     for orders 1..4, exact ``(sin s/s, (1 - cos s)/s^2)`` for order 0
-    ([TW11] slide "11.2.1 DCM algorithm"; CONVENTIONS.md ``--order``).
+    ([TW11] slide "11.2.1 DCM algorithm"; docs/conventions.md ``--order``).
     """
     if order == 0:
         return rotvec_to_dcm_s(x, y, z)
@@ -517,7 +517,7 @@ def push_rate_scalars(
     coning.py, accumulated recursively with ``1/2 alpha x dtheta`` and ``1/2
     (alpha x dv + v x dtheta)`` (docs/algorithms.md); a sample at the start time
     only opens the first interval, and without one the first sample's values
-    hold back to the start (CONVENTIONS.md "Sensor data").
+    hold back to the start (docs/conventions.md "Sensor data").
     """
     t_last = s[S_TJ]
     if cfg[CFG_SAMPLED] < 0.5:

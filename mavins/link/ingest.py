@@ -1,6 +1,6 @@
 """MAVLink IMU messages in, validated IMU samples out (or a counted rejection).
 
-Accepted inputs (CONVENTIONS.md "MAVLink"): HIGHRES_IMU (SI units, ``id``),
+Accepted inputs (docs/conventions.md "MAVLink"): HIGHRES_IMU (SI units, ``id``),
 RAW_IMU (int16 counts; ArduPilot: mG and mrad/s, scales are settings, ``id``),
 SCALED_IMU / SCALED_IMU2 / SCALED_IMU3 (mG, mrad/s, ``time_boot_ms``).
 Every sample is checked before it reaches the strapdown core: selected

@@ -20,7 +20,7 @@ from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Protocol
 
-from .mavlink import mavlink, mavutil
+from .mavlink import mavlink, mavutil, parser as _parser
 
 RCVBUF_BYTES = 8 * 1024 * 1024
 MAX_DATAGRAM = 65535
@@ -60,12 +60,6 @@ class PeerPolicy:
     max_peers: int = 8
     max_lag: float = 0.25  # s: under a sustained overload, a datagram that waited longer is skipped
     stall_grace: float = 2.0  # s of reading late data before a backlog counts as overload, not a stall
-
-
-def _parser() -> mavlink.MAVLink:
-    p = mavlink.MAVLink(None)
-    p.robust_parsing = True
-    return p
 
 
 def _reset(parser: mavlink.MAVLink) -> None:

@@ -1,4 +1,4 @@
-"""The one place that imports pymavlink: MAVLink 2, common dialect (CONVENTIONS.md)."""
+"""The one place that imports pymavlink: MAVLink 2, common dialect (docs/conventions.md)."""
 
 from __future__ import annotations
 
@@ -11,4 +11,11 @@ from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
 
 mavutil.set_dialect("common")
 
-__all__ = ["mavlink", "mavutil"]
+__all__ = ["mavlink", "mavutil", "parser"]
+
+
+def parser() -> mavlink.MAVLink:
+    """A MAVLink 2 parser that reports bad frames as BAD_DATA instead of raising."""
+    p = mavlink.MAVLink(None)
+    p.robust_parsing = True
+    return p

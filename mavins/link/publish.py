@@ -1,4 +1,4 @@
-"""Output sets to MAVLink messages (CONVENTIONS.md "MAVLink" outputs).
+"""Output sets to MAVLink messages (docs/conventions.md "MAVLink" outputs).
 
 Every message is stamped with the sensor time of the solution it carries
 (``time_boot_ms = time_usec // 1000``). LOCAL_POSITION_NED and ODOMETRY use

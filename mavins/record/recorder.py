@@ -222,16 +222,11 @@ class Recorder:
         if abs(tt[i] - t) > TRUTH_MATCH_S:
             return
         tr = self._truth[i]  # type: ignore[index]
-        q_est = row[10:14]
-        q_tru = tr[10:14]
-        d = abs(float(np.dot(q_est, q_tru)))
-        att = math.degrees(2 * math.acos(min(d, 1.0)))
-        lat = math.radians(tr[1])
-        from ..core import earth
+        from ..core.frames import north_east_error
+        from ..core.rotation import quat_angle_between
 
-        r_n, r_e = earth.radii(lat)
-        dn = (float(row[1]) - lat) * r_n
-        de = (float(row[2]) - math.radians(tr[2])) * r_e * math.cos(lat)
+        att = math.degrees(quat_angle_between(np.ascontiguousarray(tr[10:14]), np.ascontiguousarray(row[10:14])))
+        dn, de = north_east_error(float(row[1]), float(row[2]), math.radians(tr[1]), math.radians(tr[2]))
         self._push("/errors/attitude", t, [att])
         self._push("/errors/position", t, [math.hypot(dn, de)])
         self._push("/errors/velocity", t, [float(np.linalg.norm(row[4:7] - tr[4:7]))])
