@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .aiding import FilterSettings
 from .core.frames import north_east_error
 from .core.rotation import euler_to_quat, quat_angle_rows
 from .engine import EngineConfig
@@ -44,6 +45,7 @@ class Collected:
     attitude: list[tuple[int, float, float, float]] = field(default_factory=list)
     global_pos: list[tuple[int, int, int, int, int, int, int]] = field(default_factory=list)
     local_pos: list[tuple[int, float, float, float]] = field(default_factory=list)
+    odometry_var: dict[int, tuple[float, float, float]] = field(default_factory=dict)  # ms -> var n, e, d (m^2)
     heartbeats: int = 0
     statustext: list[str] = field(default_factory=list)
     other: int = 0
@@ -51,7 +53,7 @@ class Collected:
 
 def collect(url: str, stop: threading.Event, into: Collected, ready: threading.Event) -> None:
     """Receive from ``url`` until ``stop``; keep the service's outputs."""
-    conn = mavutil.mavlink_connection(url, dialect="common")
+    conn = mavutil.mavlink_connection(url, dialect="ardupilotmega")
     ready.set()
     try:
         while not stop.is_set():
@@ -63,6 +65,9 @@ def collect(url: str, stop: threading.Event, into: Collected, ready: threading.E
                 into.attitude.append((m.time_boot_ms, m.roll, m.pitch, m.yaw))
             elif name == "GLOBAL_POSITION_INT":
                 into.global_pos.append((m.time_boot_ms, m.lat, m.lon, m.alt, m.vx, m.vy, m.vz))
+            elif name == "ODOMETRY":
+                c = m.pose_covariance
+                into.odometry_var[m.time_usec // 1000] = (c[0], c[6], c[11])
             elif name == "LOCAL_POSITION_NED":
                 into.local_pos.append((m.time_boot_ms, m.x, m.y, m.z))
             elif name == "HEARTBEAT":
@@ -86,41 +91,68 @@ class DemoReport:
     vel_err_ms_final: float
     summary: Summary
     collected: Collected
+    att_err_deg_rms: float = math.nan
+    pos_err_m_rms: float = math.nan
+    pos_err_m_max: float = math.nan
+    within_3_sigma: tuple[int, int] = (0, 0)  # (north/east errors inside 3 sigma, errors compared)
 
     def lines(self) -> list[str]:
+        inside, total = self.within_3_sigma
+        share = f"{inside}/{total} ({100.0 * inside / total:.1f} %)" if total else "none compared"
         return [
             f"published output sets received: {self.outputs}",
-            f"attitude error vs truth: max {self.att_err_deg_max:.4f} deg, final {self.att_err_deg_final:.4f} deg",
-            f"position error vs truth (final): {self.pos_err_m_final:.3f} m",
+            f"attitude error vs truth: RMS {self.att_err_deg_rms:.4f} deg, max {self.att_err_deg_max:.4f} deg, "
+            f"final {self.att_err_deg_final:.4f} deg",
+            f"horizontal position error vs truth: RMS {self.pos_err_m_rms:.3f} m, max {self.pos_err_m_max:.3f} m, "
+            f"final {self.pos_err_m_final:.3f} m",
             f"velocity error vs truth (final): {self.vel_err_ms_final:.4f} m/s",
+            f"north/east position errors inside the published 3-sigma (ODOMETRY covariance): {share}",
         ]
 
 
-def compare(collected: Collected, truth: np.ndarray) -> tuple[float, float, float, float]:
-    """Max and final attitude error (deg), final position (m) and velocity (m/s) errors."""
+def compare(collected: Collected, truth: np.ndarray) -> dict[str, object]:
+    """Errors of what was published against the truth at the same sensor time: attitude (deg,
+    rotation angle) RMS/max/final, horizontal position (m) RMS/max/final, final velocity (m/s),
+    and how many north/east errors lie inside the ODOMETRY covariance's 3-sigma."""
     ms_truth = np.floor(np.round(truth[:, 0] * 1e6) / 1000).astype(np.int64)
     att = np.array(collected.attitude, dtype=float).reshape(-1, 4)
     idx = np.searchsorted(ms_truth, att[:, 0].astype(np.int64))
     ok = idx < len(truth)
     att, idx = att[ok], idx[ok]
     q_pub = np.array([euler_to_quat(r, p, y) for _, r, p, y in att]).reshape(-1, 4)
-    d = quat_angle_rows(q_pub, np.ascontiguousarray(truth[idx, 10:14])) if len(att) else np.array([math.nan])
-    d_deg = np.degrees(d)
-    pos_err = vel_err = math.nan
+    d = np.degrees(quat_angle_rows(q_pub, np.ascontiguousarray(truth[idx, 10:14]))) if len(att) \
+        else np.array([math.nan])
+    out: dict[str, object] = {"att_max": float(np.nanmax(d)), "att_final": float(d[-1]),
+                              "att_rms": float(np.sqrt(np.nanmean(d * d))), "pos_final": math.nan,
+                              "vel_final": math.nan, "pos_rms": math.nan, "pos_max": math.nan, "inside": (0, 0)}
     if collected.global_pos:
-        g = collected.global_pos[-1]
-        i = min(int(np.searchsorted(ms_truth, g[0])), len(truth) - 1)
-        dn, de = north_east_error(math.radians(g[1] * 1e-7), math.radians(g[2] * 1e-7),
-                                  math.radians(truth[i, 1]), math.radians(truth[i, 2]))
-        pos_err = math.hypot(dn, de)
-        vel_err = float(np.linalg.norm(np.array(g[4:7]) / 100.0 - truth[i, 4:7]))
-    return float(np.nanmax(d_deg)), float(d_deg[-1]), pos_err, vel_err
+        errs, inside, total = [], 0, 0
+        for g in collected.global_pos:
+            i = int(np.searchsorted(ms_truth, g[0]))
+            if i >= len(truth):
+                continue
+            dn, de = north_east_error(math.radians(g[1] * 1e-7), math.radians(g[2] * 1e-7),
+                                      math.radians(truth[i, 1]), math.radians(truth[i, 2]))
+            errs.append(math.hypot(dn, de))
+            var = collected.odometry_var.get(g[0])
+            if var is not None and all(math.isfinite(v) for v in var[:2]):
+                total += 2
+                inside += int(abs(dn) <= 3.0 * math.sqrt(var[0])) + int(abs(de) <= 3.0 * math.sqrt(var[1]))
+        if errs:
+            e = np.array(errs)
+            out.update(pos_final=float(e[-1]), pos_rms=float(np.sqrt(np.mean(e * e))), pos_max=float(e.max()),
+                       inside=(inside, total))
+            g = collected.global_pos[-1]
+            i = min(int(np.searchsorted(ms_truth, g[0])), len(truth) - 1)
+            out["vel_final"] = float(np.linalg.norm(np.array(g[4:7]) / 100.0 - truth[i, 4:7]))
+    return out
 
 
 def run_demo(
     scenario: str = "flight", duration: float | None = 120.0, speed: float | None = 10.0, grade: str = "industrial",
     heading: str = "vehicle", rerun_path: Path | None = None, rerun_serve: bool = False, seed: int = 0,
-    stop: threading.Event | None = None,
+    stop: threading.Event | None = None, aiding: tuple[str, ...] = ("gnss", "baro"),
+    gnss_outage: tuple[float, float] | None = (60.0, 90.0),
 ) -> DemoReport:
     """Simulate, serve and collect over UDP on 127.0.0.1; return the error report."""
     from sim.generate import generate
@@ -131,7 +163,8 @@ def run_demo(
     run = generate(load(scenario), duration=duration, seed=seed, grade=grade, usec_grid=True)
     p_in, p_out = free_udp_port(), free_udp_port()
     init = run.init()
-    engine_cfg = EngineConfig(lat=init.lat, lon=init.lon, alt=init.h, heading=heading, align=5.0)
+    engine_cfg = EngineConfig(lat=init.lat, lon=init.lon, alt=init.h, heading=heading, align=5.0,
+                              filter=FilterSettings(spec=grade if grade != "ideal" else "navigation", aiding=aiding))
     recorder = None
     if rerun_path is not None or rerun_serve:
         from .record.recorder import Recorder
@@ -153,7 +186,8 @@ def run_demo(
     srv = threading.Thread(target=lambda: summary_box.append(svc.run(svc_stop)), daemon=True)
     srv.start()
     try:
-        stream(run, f"udpout:127.0.0.1:{p_in}", StreamOptions(speed=speed), stop=stop)
+        outages = (gnss_outage,) if gnss_outage is not None else ()
+        stream(run, f"udpout:127.0.0.1:{p_in}", StreamOptions(speed=speed, gnss_outages=outages), stop=stop)
         time.sleep(0.5)
     finally:
         svc_stop.set()
@@ -162,6 +196,7 @@ def run_demo(
         col.join(5.0)
         if recorder is not None:
             recorder.close()
-    a_max, a_fin, p_fin, v_fin = compare(collected, run.exact.truth)
-    return DemoReport(len(collected.attitude), a_max, a_fin, p_fin, v_fin,
-                      summary_box[0] if summary_box else svc.summary, collected)
+    c = compare(collected, run.exact.truth)
+    return DemoReport(len(collected.attitude), c["att_max"], c["att_final"], c["pos_final"], c["vel_final"],  # type: ignore[arg-type]
+                      summary_box[0] if summary_box else svc.summary, collected, c["att_rms"], c["pos_rms"],  # type: ignore[arg-type]
+                      c["pos_max"], c["inside"])  # type: ignore[arg-type]

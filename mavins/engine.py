@@ -18,6 +18,7 @@ import numpy as np
 from .core import align, earth
 from .core import strapdown as sd
 from .core.records import ImuSample, Solution
+from .aiding import FilterSettings, LiveFilter
 from .core.rotation import euler_to_dcm
 
 
@@ -54,6 +55,13 @@ class EngineConfig:
     max_gap: float = 1.0  # s: a longer gap in sensor time is not integrated; the solution is degraded
     restart_gap: float = 60.0  # s: a longer jump forward (e.g. boot time -> UNIX time) restarts alignment
     gyro_bias: str = "estimate"  # "estimate": mean gyro minus Earth rate over the static window; "none"
+    filter: FilterSettings = field(default_factory=FilterSettings)
+    geoid_height: float = 0.0  # m: constant geoid undulation, AMSL altitudes of GNSS input + this = ellipsoidal
+    zupt_gyro: float = 0.02  # rad/s: below this (bias-corrected) a sample counts as still
+    zupt_accel: float = 0.15  # m/s^2: ||f| - g| below this likewise
+    zupt_still_s: float = 0.5  # s of still samples before zero-velocity updates start
+    zupt_every_s: float = 0.1  # s between zero-velocity updates while still
+    aiding_every_s: float = 0.1  # s between magnetometer updates
 
 
 @dataclass
@@ -69,6 +77,7 @@ class Engine:
     _kcfg: np.ndarray = field(init=False)
     _s: np.ndarray | None = field(init=False, default=None)
     _pos: tuple[float, float, float] | None = field(init=False, default=None)
+    _pos_sigma: float | None = field(init=False, default=None)
     _vehicle_yaw: float | None = field(init=False, default=None)
     _acc: list[np.ndarray] = field(init=False, default_factory=list)
     _t_align0: float = field(init=False, default=0.0)
@@ -77,7 +86,10 @@ class Engine:
     _dt_nominal: float | None = field(init=False, default=None)
     _gyro_last: tuple[float, float, float] = field(init=False, default=(0.0, 0.0, 0.0))
     gyro_bias: np.ndarray = field(init=False, default_factory=lambda: np.zeros(3))
-    _bias: tuple[float, float, float] = field(init=False, default=(0.0, 0.0, 0.0))
+    filter: LiveFilter = field(init=False)
+    _still_since: float | None = field(init=False, default=None)
+    _next_zupt: float = field(init=False, default=-math.inf)
+    _next_mag: float = field(init=False, default=-math.inf)
     _row: np.ndarray = field(init=False, default_factory=lambda: np.zeros(sd.OUT_SIZE))
 
     def __post_init__(self) -> None:
@@ -86,6 +98,7 @@ class Engine:
             raise ValueError(f"heading must be degrees or one of {', '.join(HEADING_WORDS)}, got {h!r}")
         if self.cfg.gyro_bias not in ("estimate", "none"):
             raise ValueError(f"gyro_bias must be estimate or none, got {self.cfg.gyro_bias!r}")
+        self.filter = LiveFilter(self.cfg.filter)
         self._kcfg = sd.make_config(
             samples=self.cfg.samples, attitude=self.cfg.attitude, order=self.cfg.order,
             earth_model=self.cfg.earth_model, vertical=self.cfg.vertical, imu_rates=self.cfg.imu_rates,
@@ -96,10 +109,11 @@ class Engine:
             self._event("INFO", "WAITING: for an initial position (--lat/--lon/--alt or the vehicle's GPS)")
 
     # -- inputs besides the IMU ------------------------------------------------
-    def set_position(self, lat: float, lon: float, alt: float, source: str) -> None:
-        """Initial position (deg, deg, ellipsoidal m), used at the next alignment."""
+    def set_position(self, lat: float, lon: float, alt: float, source: str, sigma: float | None = None) -> None:
+        """Initial position (deg, deg, ellipsoidal m; 1-sigma m if known), used at the next alignment."""
         if self._pos is None:
             self._pos = (lat, lon, alt)
+            self._pos_sigma = sigma
             self._event("INFO", f"initial position from {source}: {lat:.7f}, {lon:.7f}, {alt:.1f} m")
 
     def set_vehicle_yaw(self, yaw_rad: float) -> None:
@@ -193,7 +207,6 @@ class Engine:
         self._acc.clear()
         self.degraded = False
         self.gyro_bias = np.zeros(3)
-        self._bias = (0.0, 0.0, 0.0)
         if self.cfg.gyro_bias == "estimate" and source != "gyrocompass":
             # at rest the gyros read C_n^b w_ie^n; the rest is bias (zero-rate calibration)
             c_bn = euler_to_dcm(roll, pitch, yaw)
@@ -203,12 +216,16 @@ class Engine:
             f"aligned over {smp.t - self._t_align0:.1f} s: roll {math.degrees(roll):.2f} pitch "
             f"{math.degrees(pitch):.2f} heading {math.degrees(yaw):.2f} deg from {source}",
         )
-        self._bias = (float(self.gyro_bias[0]), float(self.gyro_bias[1]), float(self.gyro_bias[2]))
+        self.filter.start(self._s, self.gyro_bias, self._dt_nominal or 0.01, int(self._kcfg[sd.CFG_SAMPLES]),
+                          self._pos_sigma, source, math.radians(lat),
+                          smp.t - self._t_align0 if self.gyro_bias.any() else 0.0)
+        self._still_since = None
+        self._next_zupt = self._next_mag = -math.inf
         if self.gyro_bias.any():
             self._event("INFO", "gyro bias estimated at rest: "
                         + " ".join(f"{math.degrees(b) * 3600:.1f}" for b in self.gyro_bias) + " deg/h")
         if self.cfg.imu_rates == "sampled":
-            sd.push_rate(self._s, self._kcfg, smp.t, np.asarray(smp.gyro) - self.gyro_bias, np.asarray(smp.accel))
+            self.filter.push(self._s, self._kcfg, smp.t, smp.gyro, smp.accel)
 
     def _heading(self, w_mean: np.ndarray, m_mean: np.ndarray, roll: float, pitch: float) -> tuple[float, str]:
         h = self.cfg.heading
@@ -227,14 +244,19 @@ class Engine:
         return align.gyrocompass(w_mean, roll, pitch), "gyrocompass"
 
     def _nav_step(self, smp: ImuSample) -> Solution | None:
-        g, f, b = smp.gyro, smp.accel, self._bias
-        gx, gy, gz = g[0] - b[0], g[1] - b[1], g[2] - b[2]
-        self._gyro_last = (gx, gy, gz)
         s = self._s
-        r = sd.push_rate_scalars(s, self._kcfg, smp.t, gx, gy, gz, f[0], f[1], f[2])  # type: ignore[arg-type]
+        flt = self.filter
+        r = flt.push(s, self._kcfg, smp.t, smp.gyro, smp.accel)  # type: ignore[arg-type]
+        bg = flt.gyro_bias
+        self._gyro_last = (smp.gyro[0] - bg[0], smp.gyro[1] - bg[1], smp.gyro[2] - bg[2])
         if r != 1:
             return None
-        if not self._output_due(sd.state_time(s)):  # type: ignore[arg-type]
+        self._aid_from_sample(smp)
+        t = sd.state_time(s)  # type: ignore[arg-type]
+        flt.tick(t)
+        self.events.extend(flt.events)
+        flt.events.clear()
+        if not self._output_due(t):
             return None
         sd.solution_row(s, self._kcfg, self._row)  # type: ignore[arg-type]
         r = self._row
@@ -244,7 +266,47 @@ class Engine:
             self._event("ERROR", "solution diverged (non-finite or beyond any vehicle): re-aligning")
             self.restart("solution diverged")
             return None
-        return Solution(self._row.copy(), np.array(self._gyro_last), self._pos, self.degraded)  # type: ignore[arg-type]
+        return Solution(self._row.copy(), np.array(self._gyro_last), self._pos, self.degraded,  # type: ignore[arg-type]
+                        flt.uncertainty(t, self.counters["restarts"]))
+
+    def _aid_from_sample(self, smp: ImuSample) -> None:
+        """Measurements the IMU sample itself carries: magnetometer heading, and zero velocity
+        while the standstill detector says the vehicle is still (docs/filter.md)."""
+        aiding = self.cfg.filter.aiding
+        t = smp.t
+        if "mag" in aiding and smp.mag is not None and t >= self._next_mag and any(smp.mag):
+            self._next_mag = t + self.cfg.aiding_every_s
+            self.filter.measure(self._s, self._kcfg, t, "mag", smp.mag)  # type: ignore[arg-type]
+        if "zupt" not in aiding:
+            return
+        g_ref = earth.gravity(math.radians(self._pos[0]), self._pos[2])  # type: ignore[index]
+        still = (math.sqrt(sum(x * x for x in self._gyro_last)) < self.cfg.zupt_gyro
+                 and abs(math.sqrt(sum(x * x for x in smp.accel)) - g_ref) < self.cfg.zupt_accel)
+        if not still:
+            self._still_since = None
+            return
+        if self._still_since is None:
+            self._still_since = t
+        if t - self._still_since >= self.cfg.zupt_still_s and t >= self._next_zupt:
+            self._next_zupt = t + self.cfg.zupt_every_s
+            self.filter.measure(self._s, self._kcfg, t, "zupt")  # type: ignore[arg-type]
+
+    # -- measurements from other messages ----------------------------------------
+    def on_gnss(self, t: float | None, lat: float, lon: float, h: float, vel: tuple[float, float, float] | None,
+                sigma_h: float, sigma_v: float, sigma_vel: float) -> None:
+        """A GNSS fix (deg, deg, ellipsoidal m; NED m/s or None; 1-sigma m, m, m/s) stamped t on the
+        IMU clock (None: now). Before navigation it gives the initial position."""
+        if self.state is not State.NAVIGATING or self._s is None:
+            self.set_position(lat, lon, h, "GNSS", sigma_h)
+            return
+        t_m = sd.state_time(self._s) if t is None else t
+        self.filter.measure(self._s, self._kcfg, t_m, "gnss", math.radians(lat), math.radians(lon), h, vel,
+                            sigma_h, sigma_v, sigma_vel)
+
+    def on_baro(self, t: float | None, h: float, sigma: float) -> None:
+        """A barometric height (m, with an unknown offset the filter estimates)."""
+        if self.state is State.NAVIGATING and self._s is not None:
+            self.filter.measure(self._s, self._kcfg, sd.state_time(self._s) if t is None else t, "baro", h, sigma)
 
     def _output_due(self, t: float) -> bool:
         """One output set each time sensor time crosses a multiple of 1/rate (docs/conventions.md

@@ -17,11 +17,18 @@ from .core.frames import local_ned
 from .core.records import ImuSample, Solution
 from .engine import Engine, EngineConfig
 from .link.ingest import IMU_MESSAGES, Ingest, IngestConfig
+from .link.mavlink import mavlink
 from .record.sink import Sink
 
 log = logging.getLogger("mavins")
 
 RESTART_JUMP = 1.0  # s: sensor time going back further than this is an autopilot restart
+CLOCK_MATCH_S = 2.0  # s: an aiding message stamped this close to the IMU time is on the IMU's clock
+GNSS_MESSAGES = ("GPS_RAW_INT", "GPS_INPUT", "HIL_GPS")
+GNSS_SIGMA_H = 2.5  # m: horizontal 1-sigma when a fix gives no accuracy (docs/conventions.md GNSS default)
+GNSS_SIGMA_V = 5.0  # m
+GNSS_SIGMA_VEL = 0.3  # m/s
+BARO_SIGMA_M = 0.5  # m: barometric height 1-sigma (docs/conventions.md baro default)
 
 
 @dataclass
@@ -59,9 +66,16 @@ class Pipeline:
             return None
         if msg.get_srcComponent() == self.own_component:  # type: ignore[attr-defined]
             return None
-        if name == "GPS_RAW_INT" and msg.fix_type >= 3:  # type: ignore[attr-defined]
-            alt = msg.alt_ellipsoid / 1000.0 if getattr(msg, "alt_ellipsoid", 0) else msg.alt / 1000.0  # type: ignore[attr-defined]
-            self.engine.set_position(msg.lat * 1e-7, msg.lon * 1e-7, alt, "GPS_RAW_INT")  # type: ignore[attr-defined]
+        if name in GNSS_MESSAGES:
+            fix = gnss_fix(msg, self.engine_cfg.geoid_height)
+            if fix is None:
+                self.counters["gnss_no_fix"] += 1
+            else:
+                t, lat, lon, h, vel, sig_h, sig_v, sig_vel = fix
+                self.engine.on_gnss(self._on_imu_clock(t), lat, lon, h, vel, sig_h, sig_v, sig_vel)
+        elif name == "SCALED_PRESSURE" and math.isfinite(msg.press_abs) and msg.press_abs > 0.0:  # type: ignore[attr-defined]
+            self.engine.on_baro(self._on_imu_clock(msg.time_boot_ms * 1e-3), isa_height(msg.press_abs),  # type: ignore[attr-defined]
+                                BARO_SIGMA_M)
         elif name == "GLOBAL_POSITION_INT" and (msg.lat or msg.lon):  # type: ignore[attr-defined]
             self.engine.set_position(msg.lat * 1e-7, msg.lon * 1e-7, msg.alt / 1000.0, "GLOBAL_POSITION_INT")  # type: ignore[attr-defined]
         elif name == "ATTITUDE" and math.isfinite(msg.yaw):  # type: ignore[attr-defined]
@@ -97,6 +111,14 @@ class Pipeline:
                         rec.on_counters(float(r[0]), counts)
         return out
 
+    def _on_imu_clock(self, t: float | None) -> float | None:
+        """A message's own time if it is on the IMU's clock (within CLOCK_MATCH_S of the last
+        sample), else None: the measurement is then taken as of the latest sample."""
+        last = self.last_sample
+        if t is None or last is None or abs(t - last.t) > CLOCK_MATCH_S:
+            return None
+        return t
+
     def take_events(self) -> list[tuple[str, str]]:
         """State changes and warnings since the last call, drained once (also sent to the recorder)."""
         events = self.engine.take_events()
@@ -113,3 +135,47 @@ def _msg_time(msg: object) -> float | None:
     if hasattr(msg, "time_boot_ms"):
         return msg.time_boot_ms * 1e-3  # type: ignore[attr-defined]
     return None
+
+
+def gnss_fix(msg: object, geoid_height: float) -> tuple[float | None, float, float, float,
+                                                          tuple[float, float, float] | None, float, float, float] | None:
+    """``(t, lat, lon, h, vel, sigma_h, sigma_v, sigma_vel)`` of a 3D fix in GPS_RAW_INT, GPS_INPUT or
+    HIL_GPS (deg, deg, ellipsoidal m, NED m/s or None, 1-sigma m, m, m/s; t in s of the message's
+    own clock), or None without a 3D fix. Heights: GPS_RAW_INT's ``alt_ellipsoid`` when given,
+    else AMSL plus ``geoid_height``. Accuracies from the message when given, else the defaults."""
+    m = msg
+    name = m.get_type()  # type: ignore[attr-defined]
+    if m.fix_type < 3 or not (m.lat or m.lon):  # type: ignore[attr-defined]
+        return None
+    t = m.time_usec * 1e-6 if getattr(m, "time_usec", 0) else None  # type: ignore[attr-defined]
+    vel = None
+    sig_vel = GNSS_SIGMA_VEL
+    if name == "GPS_RAW_INT":
+        alt_e = getattr(m, "alt_ellipsoid", 0)
+        h = alt_e / 1000.0 if alt_e else m.alt / 1000.0 + geoid_height  # type: ignore[attr-defined]
+        sig_h = m.h_acc / 1000.0 if getattr(m, "h_acc", 0) else GNSS_SIGMA_H
+        sig_v = m.v_acc / 1000.0 if getattr(m, "v_acc", 0) else GNSS_SIGMA_V
+    elif name == "GPS_INPUT":
+        ign = m.ignore_flags  # type: ignore[attr-defined]
+        h = m.alt + geoid_height  # type: ignore[attr-defined]
+        sig_h = float(m.horiz_accuracy) if not ign & mavlink.GPS_INPUT_IGNORE_FLAG_HORIZONTAL_ACCURACY \
+            and m.horiz_accuracy > 0 else GNSS_SIGMA_H  # type: ignore[attr-defined]
+        sig_v = float(m.vert_accuracy) if not ign & mavlink.GPS_INPUT_IGNORE_FLAG_VERTICAL_ACCURACY \
+            and m.vert_accuracy > 0 else GNSS_SIGMA_V  # type: ignore[attr-defined]
+        if not ign & (mavlink.GPS_INPUT_IGNORE_FLAG_VEL_HORIZ | mavlink.GPS_INPUT_IGNORE_FLAG_VEL_VERT):
+            vel = (float(m.vn), float(m.ve), float(m.vd))  # type: ignore[attr-defined]
+        if not ign & mavlink.GPS_INPUT_IGNORE_FLAG_SPEED_ACCURACY and m.speed_accuracy > 0:  # type: ignore[attr-defined]
+            sig_vel = float(m.speed_accuracy)  # type: ignore[attr-defined]
+    else:  # HIL_GPS
+        h = m.alt / 1000.0 + geoid_height  # type: ignore[attr-defined]
+        sig_h = m.eph / 100.0 * GNSS_SIGMA_H if 0 < m.eph < 65535 else GNSS_SIGMA_H  # type: ignore[attr-defined]
+        sig_v = m.epv / 100.0 * GNSS_SIGMA_V if 0 < m.epv < 65535 else GNSS_SIGMA_V  # type: ignore[attr-defined]
+        vel = (m.vn / 100.0, m.ve / 100.0, m.vd / 100.0)  # type: ignore[attr-defined]
+    return t, m.lat * 1e-7, m.lon * 1e-7, h, vel, sig_h, sig_v, sig_vel  # type: ignore[attr-defined]
+
+
+def isa_height(press_hpa: float) -> float:
+    """Pressure altitude (m) of a static pressure (hPa) in the ICAO standard atmosphere:
+    ``h = (1 - (p / 1013.25)^(1 / 5.25588)) / 2.25577e-5`` (troposphere; ICAO Doc 7488).
+    Its offset from the ellipsoidal height is a filter state."""
+    return (1.0 - (press_hpa / 1013.25) ** (1.0 / 5.25588)) / 2.25577e-5

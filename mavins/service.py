@@ -39,6 +39,11 @@ log = logging.getLogger("mavins")
 
 BATCH = 256  # datagrams read per loop turn
 SYS_STATUS_PERIOD = 1.0  # s
+STATUS_RATE_HZ = 1.0  # ESTIMATOR_STATUS, EKF_STATUS_REPORT and SYSTEM_TIME per second of sensor time
+GPS_INPUT_RATE_HZ = 5.0  # GPS_INPUT per second of sensor time (--gps-input)
+UNIX_USEC_MIN = 1_000_000_000_000_000  # a GNSS time_usec above this (2001-09-09) is UNIX time, i.e. UTC
+GPS_EPOCH_UNIX_S = 315964800.0  # 1980-01-06 00:00:00 UTC
+GPS_LEAP_S = 18.0  # GPS - UTC since 2017-01-01 (IERS Bulletin C)
 DRAIN_S = 2.0  # s: on a stop, input already in the socket is processed for at most this long
 
 
@@ -133,6 +138,10 @@ class Service:
         self._sysid_known = cfg.sysid is not None
         self._last_hb = 0.0
         self._last_status = 0.0
+        self._status_tick = -1
+        self._gps_tick = -1
+        self._origin_sent = False
+        self._utc_offset: float | None = None  # UTC (s since the UNIX epoch) minus sensor time
         self._last_imu_wall = 0.0
         self._last_request = 0.0
         self._cpu0 = (time.process_time(), time.monotonic())
@@ -219,12 +228,34 @@ class Service:
                     self._send(publish.statustext(self.mav, level, text, self._text_id))
         if name in IMU_MESSAGES:
             self._last_imu_wall = time.monotonic()
+        elif name == "TIMESYNC" and msg.tc1 == 0:
+            # a request: answer at once with our clock, theirs echoed (docs/autopilots.md)
+            self._send([publish.timesync_reply(self.mav, msg.ts1, time.monotonic_ns())])
+        elif name == "GPS_RAW_INT" and msg.time_usec > UNIX_USEC_MIN and self.pipeline.last_sample is not None:
+            self._utc_offset = msg.time_usec * 1e-6 - self.pipeline.last_sample.t
         elif name == "COMMAND_ACK" and msg.command == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
             ok = msg.result == mavlink.MAV_RESULT_ACCEPTED
             log.info("SET_MESSAGE_INTERVAL %s", "accepted" if ok else f"refused (result {msg.result})")
         self._announce()
         if out is not None:
-            self._send(publish.encode(self.mav, out, self.cfg.publish, self.pipeline.engine.counters["restarts"]))
+            resets = out.unc.resets if out.unc is not None else self.pipeline.engine.counters["restarts"]
+            msgs = publish.encode(self.mav, out, self.cfg.publish, resets)
+            t = float(out.row[0])
+            k = int(t * STATUS_RATE_HZ)
+            if k != self._status_tick:
+                self._status_tick = k
+                msgs += publish.estimator_status(self.mav, out)
+                if self._utc_offset is not None:
+                    msgs.append(publish.system_time(self.mav, int((t + self._utc_offset) * 1e6), t))
+            if self.cfg.publish.gps_input and int(t * GPS_INPUT_RATE_HZ) != self._gps_tick:
+                self._gps_tick = int(t * GPS_INPUT_RATE_HZ)
+                msgs.append(publish.gps_input(self.mav, out, self.cfg.publish, self._gps_time(t)))
+            if self.cfg.publish.set_origin and not self._origin_sent and self._sysid_known:
+                self._origin_sent = True
+                msgs.append(publish.set_gps_global_origin(self.mav, self.mav.srcSystem, out.origin,
+                                                          self.cfg.publish.geoid_height))
+                log.info("sent SET_GPS_GLOBAL_ORIGIN %.7f %.7f %.1f m", *out.origin)
+            self._send(msgs)
             self.summary.outputs += 1
             rec = self.pipeline.recorder
             if rec is not None:
@@ -232,6 +263,14 @@ class Service:
                 rec.on_latency(float(out.row[0]), 1e3 * (time.time() - self._batch_time + self._batch_age))
             if self._solution is not None:
                 self._solution.write(out.row)
+
+    def _gps_time(self, t: float) -> tuple[int, int] | None:
+        """GPS week and milliseconds of sensor time t when the GNSS input carries UTC."""
+        if self._utc_offset is None:
+            return None
+        gps_s = t + self._utc_offset - GPS_EPOCH_UNIX_S + GPS_LEAP_S
+        week = int(gps_s // 604800)
+        return week, int(round((gps_s - week * 604800) * 1000.0))
 
     def _periodic(self) -> None:
         now = time.monotonic()

@@ -135,6 +135,7 @@ __all__ = [
     "allan_deviation",
     "apply",
     "apply_rows",
+    "bias_states",
     "gauss_markov_adev",
     "grade",
 ]
@@ -668,3 +669,48 @@ def allan_deviation(
         tau = mi * dt
         adev[i] = np.sqrt(np.mean(d2 * d2, axis=0) / (2.0 * tau * tau))
     return m * dt, adev[:, 0] if one_d else adev
+
+
+def bias_states(
+    model: ImuErrorModel, t: ArrayLike, seed: int, *, t_start: float | None = None
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The true sensor biases that :func:`apply` adds for the same ``model``, ``t`` and ``seed``.
+
+    The bias is ``constant + turn-on + Gauss-Markov + rate random walk``,
+    drawn from the same random streams as :func:`apply`, so it is exactly the
+    bias of that run (before scale factor, misalignment, g-sensitivity,
+    noise and quantisation, which are not biases).
+
+    Args:
+        model: error model.
+        t: (N,) true end times of the intervals [s] (as given to :func:`apply`).
+        seed: seed of the run.
+        t_start: start of the first interval [s], as in :func:`apply`.
+
+    Returns:
+        ``(gyro, accel)``: (N+1, 3) biases [rad/s], [m/s^2] at the interval
+        boundaries ``t_start, t[0], ..., t[N-1]``. Row ``i`` of :func:`apply`'s
+        increments carries ``0.5 (b[i] + b[i+1]) dt`` of the time-varying parts.
+    """
+    t_arr = np.asarray(t, dtype=np.float64)
+    if t_start is None:
+        if t_arr.size < 2:
+            raise ValueError("t_start is required when there is a single row")
+        t_start = float(t_arr[0] - (t_arr[1] - t_arr[0]))
+    dt = np.diff(t_arr, prepend=t_start)
+    rngs = _generators(seed)
+
+    def triad(err: SensorErrorModel, prefix: str) -> NDArray[np.float64]:
+        out = np.tile(np.asarray(err.bias), (dt.size + 1, 1))
+        if err.turn_on_bias_sigma > 0.0:
+            out = out + err.turn_on_bias_sigma * rngs[f"{prefix}_turn_on"].standard_normal(3)
+        if err.bias_instability_sigma > 0.0:
+            out = out + _gauss_markov_states(
+                err.bias_instability_sigma, err.bias_instability_tau, dt, rngs[f"{prefix}_gm"]
+            )
+        if err.rate_random_walk > 0.0:
+            steps = err.rate_random_walk * np.sqrt(dt[:, None]) * rngs[f"{prefix}_rrw"].standard_normal((dt.size, 3))
+            out = out + np.concatenate([np.zeros((1, 3)), np.cumsum(steps, axis=0)])
+        return out
+
+    return triad(model.gyro, "gyro"), triad(model.accel, "accel")

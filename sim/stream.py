@@ -57,6 +57,7 @@ class StreamOptions:
     raw_gyro_scale: float = 1e-3  # rad/s per RAW_IMU count
     seed: int = 0
     imus: int = 1  # 1..3; extra IMUs: HIGHRES_IMU id 1, 2 (highres) or SCALED_IMU2/3 (raw)
+    gnss_outages: tuple[tuple[float, float], ...] = ()  # (start, end) s of sensor time without GPS_RAW_INT
 
 
 @dataclass
@@ -134,7 +135,7 @@ def frames(run: SimRun, mav: mavlink.MAVLink, opts: StreamOptions) -> Iterator[t
         if send_att[i]:
             e = np.radians(row[14:17])
             out.append(mav.attitude_encode(usec // 1000 % (2**32), float(e[0]), float(e[1]), float(e[2]), 0.0, 0.0, 0.0))
-        if send_gps[i]:
+        if send_gps[i] and not any(a <= t[i] < b for a, b in opts.gnss_outages):
             noise = rng.normal(0.0, [0.5, 0.5, 1.0])
             lat = row[1] + math.degrees(noise[0] / 6.371e6)
             lon = row[2] + math.degrees(noise[1] / (6.371e6 * max(math.cos(math.radians(row[1])), 1e-6)))
@@ -167,7 +168,7 @@ def _extra_imus(run: SimRun, opts: StreamOptions) -> list[tuple[np.ndarray, np.n
 
 def stream(run: SimRun, url: str, opts: StreamOptions, stop: threading.Event | None = None) -> StreamStats:
     """Send the run to a pymavlink connection URL (e.g. ``udpout:127.0.0.1:14551``)."""
-    conn = mavutil.mavlink_connection(url, source_system=opts.sysid, source_component=opts.compid, dialect="common")
+    conn = mavutil.mavlink_connection(url, source_system=opts.sysid, source_component=opts.compid, dialect="ardupilotmega")
     stats = StreamStats()
     t_wall0 = time.monotonic()
     t_sim0 = run.exact.t0

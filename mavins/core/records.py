@@ -38,3 +38,28 @@ class Solution:
     gyro: np.ndarray
     origin: tuple[float, float, float]
     degraded: bool
+    unc: "Uncertainty | None" = None
+
+
+@dataclass
+class Uncertainty:
+    """What the error-state filter says about a solution (docs/filter.md).
+
+    1-sigma of position (m, NED), velocity (m/s, NED) and attitude error phi
+    (rad, NED) from the covariance; the latest test ratios of each
+    measurement kind (normalised innovation squared over the gate squared:
+    below 1 passes, NaN before the first one); and what is aided.
+    """
+
+    sigma_pos: np.ndarray
+    sigma_vel: np.ndarray
+    sigma_att: np.ndarray
+    sigma_gyro: np.ndarray  # rad/s, body: 1-sigma of the gyro bias estimate (the published rates' error)
+    vel_ratio: float = float("nan")
+    pos_ratio: float = float("nan")
+    hgt_ratio: float = float("nan")
+    mag_ratio: float = float("nan")
+    abs_pos: bool = False  # a GNSS position was accepted within the aiding timeout
+    abs_hgt: bool = False  # a GNSS or barometric height was accepted within the timeout
+    glitch: bool = False  # the latest GNSS fix was rejected by the gate
+    resets: int = 0  # discontinuities of the published solution so far

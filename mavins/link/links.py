@@ -234,7 +234,7 @@ class MavutilLink:
     def __init__(self, url: str) -> None:
         self.url = url
         try:
-            self.conn = mavutil.mavlink_connection(url, dialect="common", autoreconnect=True)
+            self.conn = mavutil.mavlink_connection(url, dialect="ardupilotmega", autoreconnect=True)
         except Exception as exc:  # pymavlink raises plain exceptions for bad devices/addresses
             raise LinkError(f"{url}: {exc}") from None
         self.parser = _parser()

@@ -1,4 +1,4 @@
-"""The one place that imports pymavlink: MAVLink 2, common dialect (docs/conventions.md)."""
+"""The one place that imports pymavlink: MAVLink 2, ardupilotmega dialect (common plus ArduPilot's messages; docs/conventions.md)."""
 
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ import os
 os.environ.setdefault("MAVLINK20", "1")
 
 from pymavlink import mavutil  # noqa: E402  (MAVLINK20 must be set before this import)
-from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
+from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
-mavutil.set_dialect("common")
+mavutil.set_dialect("ardupilotmega")
 
 __all__ = ["mavlink", "mavutil", "parser"]
 

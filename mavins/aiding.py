@@ -1,0 +1,247 @@
+"""The error-state filter on the live path: a thin stateful shell over mavins.core.
+
+The engine feeds every navigating IMU sample through :meth:`LiveFilter.push`
+(bias correction, strapdown, covariance propagation: core/aided.py) and hands
+measurements over as they arrive (GNSS, barometric height, magnetometer,
+zero velocity). Each measurement is applied at its own time on the IMU clock:
+one stamped at or before the last attitude update is taken back along the
+velocity (core/kalman.py); one stamped after it waits for the update that
+passes its time. Everything numeric happens in the compiled core; this class
+keeps the arrays, the counters and what the status messages report.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .core import aided, earth, errmodel, kalman
+from .core import strapdown as sd
+from .core.frames import north_east_error
+from .core.records import Uncertainty
+
+AIDING_KINDS = ("gnss", "baro", "mag", "zupt")
+ABS_TIMEOUT_S = 5.0  # s of sensor time after the last accepted fix during which position counts as absolute
+GNSS_LOST_S = 3.0  # s without an accepted fix after which GNSS is reported lost
+JUMP_M = 1.0  # m: an accepted position correction above this is a discontinuity (reset_counter)
+
+
+@dataclass
+class FilterSettings:
+    """How the live filter is set up (docs/filter.md)."""
+
+    spec: str | dict = "consumer"  # grade name or the contract's IMU spec keys
+    aiding: tuple[str, ...] = ("gnss", "baro", "mag")
+    gate: float = 5.0
+    lever_arm: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    declination: float = 0.0  # deg, east positive
+    sigma_pos: float = 10.0  # m: initial position 1-sigma without a fix
+    sigma_vel: float = 0.1  # m/s: initial velocity 1-sigma (aligned at rest)
+    sigma_level: float = 1.0  # deg
+    sigma_yaw: float = 10.0  # deg
+    sigma_baro_offset: float = 50.0  # m
+    sigma_mag: float = 3.0  # deg of heading
+    sigma_zupt: float = 0.02  # m/s
+    predict_dt: float = 0.01  # s: the covariance is propagated at about this interval
+
+
+@dataclass
+class LiveFilter:
+    """P, the bias estimates and the bookkeeping of one navigation run."""
+
+    settings: FilterSettings
+    counters: Counter = field(default_factory=Counter)
+    events: list[tuple[str, str]] = field(default_factory=list)
+    resets: int = 0
+
+    def __post_init__(self) -> None:
+        for k in self.settings.aiding:
+            if k not in AIDING_KINDS:
+                raise ValueError(f"aiding kinds are {', '.join(AIDING_KINDS)} (or none), got {k!r}")
+        self.spec = errmodel.make_spec(self.settings.spec)
+        self.lever = np.asarray(self.settings.lever_arm, dtype=float).reshape(3)
+        self.P = np.zeros((errmodel.NX, errmodel.NX))
+        self.bias = np.zeros(kalman.B_SIZE)
+        self.acc = np.zeros(13)
+        self.sums = np.zeros(7)
+        self.predict_every = 1
+        self._pending: list[tuple[float, str, tuple]] = []
+        self.ratios: dict[str, float] = {}
+        self.last_pos_t = -math.inf
+        self.last_hgt_t = -math.inf
+        self.glitch = False
+        self.gnss_seen = False
+        self.gnss_lost = False
+        self._w_ib = np.zeros(3)
+        self._t_prev_k = 0.0
+
+    # -- lifecycle ---------------------------------------------------------------
+    def start(self, s: np.ndarray, gyro_bias: np.ndarray, dt_sample: float, samples: int,
+              sigma_pos: float | None = None, heading_source: str = "--heading", lat: float = 0.0,
+              bias_window_s: float = 0.0) -> None:
+        """Begin at the end of the alignment: P from the settings and the alignment's sources,
+        the gyro bias from the rest window (``bias_window_s`` > 0: a zero-rate calibration over
+        that many seconds, whose 1-sigma replaces the spec's turn-on sigma)."""
+        st = self.settings
+        sigma_yaw = math.radians(self.yaw_sigma_deg(heading_source, lat))
+        self.P = kalman.initial_covariance(self.spec, sigma_pos or st.sigma_pos, st.sigma_vel,
+                                           math.radians(self.level_sigma_deg()), sigma_yaw, st.sigma_baro_offset)
+        if bias_window_s > 0.0:
+            # the window mean's white-noise part ARW / sqrt(T), and the Earth rate misattributed
+            # through the heading error (Omega sigma_yaw); the Gauss-Markov part keeps its own state
+            var = self.spec[errmodel.SP_GYRO_ARW] ** 2 / bias_window_s + (earth.OMEGA * sigma_yaw) ** 2
+            for i in range(3):
+                j = errmodel.X_BG + i
+                self.P[j, :] = 0.0
+                self.P[:, j] = 0.0
+                self.P[j, j] = var
+        self.bias[:] = 0.0
+        self.bias[kalman.B_BG:kalman.B_BG + 3] = gyro_bias
+        self.acc[:] = 0.0
+        self.sums[:] = 0.0
+        self.sums[6] = sd.state_time(s)
+        self._t_prev_k = sd.state_time(s)
+        self.predict_every = max(1, int(round(st.predict_dt / max(dt_sample * samples, 1e-6))))
+        self._pending.clear()
+        self.ratios.clear()
+        self.last_pos_t = self.last_hgt_t = -math.inf
+        self.glitch = False
+
+    def level_sigma_deg(self) -> float:
+        """1-sigma of the coarse level (deg): the accelerometer bias over g (textbook ch. 4 limit),
+        never below 0.05 deg nor above the settings' value."""
+        limit = math.degrees(math.atan(self.spec[errmodel.SP_ACC_BIAS] / 9.8))
+        return min(self.settings.sigma_level, max(0.05, limit))
+
+    def yaw_sigma_deg(self, source: str, lat: float) -> float:
+        """1-sigma of the initial heading (deg) by its source: a typed number the settings'
+        value; the vehicle's own estimate 1; the magnetometer 5; gyrocompassing the gyro
+        bias over the horizontal Earth rate (textbook ch. 4 limit), at most 30."""
+        if source == "vehicle ATTITUDE":
+            return min(1.0, self.settings.sigma_yaw)  # an autopilot EKF heading: about 1 deg
+        if source == "magnetometer":
+            return min(5.0, self.settings.sigma_yaw)
+        if source == "gyrocompass":
+            horiz = earth.OMEGA * max(math.cos(lat), 1e-3)
+            return min(30.0, max(0.05, math.degrees(math.atan(self.spec[errmodel.SP_GYRO_BIAS] / horiz))))
+        return self.settings.sigma_yaw
+
+    def push(self, s: np.ndarray, cfg: np.ndarray, t: float, w: tuple, f: tuple) -> int:
+        """One IMU sample (rad/s, m/s^2, FRD, raw): strapdown plus filter; 1 when an attitude
+        update completed (pending measurements whose time it passed are then applied)."""
+        r = aided.push_rate_aided(s, cfg, self.spec, self.P, self.bias, self.acc, self.sums, t,
+                                  w[0], w[1], w[2], f[0], f[1], f[2], self.predict_every)
+        if r == 1:
+            tk = sd.state_time(s)
+            T = tk - self._t_prev_k
+            self._t_prev_k = tk
+            if T > 0.0:
+                self._w_ib = np.array(w) - self.gyro_bias
+            if self._pending:
+                due = [p for p in self._pending if p[0] <= tk]
+                self._pending = [p for p in self._pending if p[0] > tk]
+                for t_m, kind, args in due:
+                    self._apply(s, cfg, t_m, kind, args)
+        return r
+
+    @property
+    def gyro_bias(self) -> np.ndarray:
+        """Gyro bias estimate (rad/s, body): constant plus Gauss-Markov part."""
+        return self.bias[kalman.B_BG:kalman.B_BG + 3] + self.bias[kalman.B_GG:kalman.B_GG + 3]
+
+    @property
+    def accel_bias(self) -> np.ndarray:
+        """Accelerometer bias estimate (m/s^2, body)."""
+        return self.bias[kalman.B_BA:kalman.B_BA + 3] + self.bias[kalman.B_GA:kalman.B_GA + 3]
+
+    # -- measurements ---------------------------------------------------------------
+    def measure(self, s: np.ndarray, cfg: np.ndarray, t_m: float, kind: str, *args: object) -> None:
+        """A measurement stamped t_m (s, IMU clock): applied now if the solution has passed it,
+        else when it does. Kinds: ``gnss`` (lat, lon rad, h m, vel NED or None, sigma_h, sigma_v,
+        sigma_vel), ``baro`` (h m, sigma), ``mag`` (m_b body), ``zupt`` ()."""
+        if kind not in self.settings.aiding:
+            return
+        if t_m > sd.state_time(s):
+            if len(self._pending) < 64:
+                self._pending.append((t_m, kind, args))
+            else:
+                self.counters[f"{kind}_dropped_pending"] += 1
+            return
+        self._apply(s, cfg, t_m, kind, args)
+
+    def _apply(self, s: np.ndarray, cfg: np.ndarray, t_m: float, kind: str, args: tuple) -> None:
+        tk = sd.state_time(s)
+        late = max(0.0, tk - t_m)
+        aided.flush_propagation(s, cfg, self.spec, self.P, self.acc)
+        gate = self.settings.gate
+        if kind == "gnss":
+            lat, lon, h, vel, sig_h, sig_v, sig_vel = args
+            lat0, lon0, _ = sd.position(s, cfg)
+            nu, H, R = kalman.gnss_position(s, cfg, lat, lon, h, self.lever, late, sig_h, sig_v)
+            nis, ratio, ok = kalman.apply_update(s, cfg, self.bias, self.P, H, nu, R, gate)
+            self._count("gnss_pos", ratio, ok)
+            self.ratios["pos"] = ratio
+            self.ratios["hgt"] = ratio
+            if ok:
+                lat1, lon1, _ = sd.position(s, cfg)
+                if math.hypot(*north_east_error(lat1, lon1, lat0, lon0)) > JUMP_M:
+                    self.resets += 1
+                if self.gnss_lost:
+                    self.events.append(("INFO", "GNSS recovered: position aided again"))
+                self.gnss_lost = False
+                self.gnss_seen = True
+                self.last_pos_t = self.last_hgt_t = t_m
+            self.glitch = not ok
+            if vel is not None:
+                nu, H, R = kalman.gnss_velocity(s, np.asarray(vel, dtype=float), self._w_ib, self.lever, late,
+                                                max(tk - self.sums[6], 1e-3), sig_vel)
+                nis, ratio, ok = kalman.apply_update(s, cfg, self.bias, self.P, H, nu, R, gate)
+                self._count("gnss_vel", ratio, ok)
+                self.ratios["vel"] = ratio
+        elif kind == "baro":
+            h, sigma = args
+            nu, H, R = kalman.baro_height(s, self.bias, h, late, sigma)
+            nis, ratio, ok = kalman.apply_update(s, cfg, self.bias, self.P, H, nu, R, gate)
+            self._count("baro", ratio, ok)
+            self.ratios["hgt"] = ratio
+            if ok:
+                self.last_hgt_t = t_m
+        elif kind == "mag":
+            (m_b,) = args
+            nu, H, R = kalman.mag_heading(s, np.asarray(m_b, dtype=float), math.radians(self.settings.declination),
+                                          math.radians(self.settings.sigma_mag))
+            nis, ratio, ok = kalman.apply_update(s, cfg, self.bias, self.P, H, nu, R, gate)
+            self._count("mag", ratio, ok)
+            self.ratios["mag"] = ratio
+        elif kind == "zupt":
+            nu, H, R = kalman.zupt(s, self.settings.sigma_zupt)
+            nis, ratio, ok = kalman.apply_update(s, cfg, self.bias, self.P, H, nu, R, gate)
+            self._count("zupt", ratio, ok)
+            self.ratios["vel"] = ratio
+
+    def _count(self, kind: str, ratio: float, ok: bool) -> None:
+        self.counters[f"{kind}_{'accepted' if ok else 'rejected'}"] += 1
+
+    def tick(self, t: float) -> None:
+        """Bookkeeping at an output: GNSS loss after GNSS_LOST_S without an accepted fix."""
+        if self.gnss_seen and not self.gnss_lost and t - self.last_pos_t > GNSS_LOST_S:
+            self.gnss_lost = True
+            self.counters["gnss_lost"] += 1
+            self.events.append(("WARNING", f"GNSS lost: no accepted fix for {GNSS_LOST_S:.0f} s, free inertial"))
+
+    # -- what is published ------------------------------------------------------------
+    def uncertainty(self, t: float, resets: int) -> Uncertainty:
+        """1-sigma, test ratios and aiding flags at sensor time t (s)."""
+        d = np.sqrt(np.maximum(np.diag(self.P), 0.0))
+        x = errmodel
+        sg = np.sqrt(np.maximum(d[x.X_BG:x.X_BG + 3] ** 2 + d[x.X_GG:x.X_GG + 3] ** 2, 0.0))
+        return Uncertainty(
+            sigma_pos=d[x.X_DP:x.X_DP + 3].copy(), sigma_vel=d[x.X_DV:x.X_DV + 3].copy(),
+            sigma_att=d[x.X_PHI:x.X_PHI + 3].copy(), sigma_gyro=sg,
+            vel_ratio=self.ratios.get("vel", math.nan), pos_ratio=self.ratios.get("pos", math.nan),
+            hgt_ratio=self.ratios.get("hgt", math.nan), mag_ratio=self.ratios.get("mag", math.nan),
+            abs_pos=t - self.last_pos_t <= ABS_TIMEOUT_S, abs_hgt=t - self.last_hgt_t <= ABS_TIMEOUT_S,
+            glitch=self.glitch, resets=resets + self.resets)

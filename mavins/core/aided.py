@@ -1,0 +1,545 @@
+"""Aided navigation: the strapdown solution with the closed-loop error-state filter, over whole arrays.
+
+:func:`run_aided` is the compiled batch driver (the same increment rows as
+strapdown.run_increments); :func:`navigate_aided` is its thin Python shell in
+the style of runner.navigate. Per IMU row: subtract the current bias
+estimates (``dtheta - b_g dt``, ``dv - b_a dt``), push the row through
+strapdown.push_increment; per attitude (k) update: decay the Gauss-Markov
+bias estimates, propagate P (every ``predict_every`` updates over the summed
+interval, with the interval's mean C_b^n and specific force), apply every
+measurement stamped at or before the update's time (kalman.py, late-fix rule
+there), write one output row.
+
+Output row (kernel units; :func:`to_file_units` gives the contract's file
+units), 35 columns: the 14 solution columns of strapdown.solution_row
+(radians), then the 1-sigma of the filter ``sigma_n,e,d`` (m),
+``sigma_vn,ve,vd`` (m/s), ``sigma_att_n,e,d`` (rad, of phi), the bias
+estimates ``bg_x,y,z`` (rad/s), ``ba_x,y,z`` (m/s^2) and their 1-sigma
+``sigma_bg_x,y,z``, ``sigma_ba_x,y,z``. A bias and its sigma are those of
+the sum of the constant and the Gauss-Markov parts (errmodel.py).
+
+Measurement rows (kernel units, each sorted by time; rows before the start
+are skipped):
+
+* GNSS ``t, lat, lon (rad), h (m), vn, ve, vd (m/s), sigma_h, sigma_v (m),
+  sigma_vel (m/s)``: position used when lat, lon, h are finite, velocity
+  when vn, ve, vd are;
+* baro ``t, h (m), sigma (m)``: h is barometric height with an unknown
+  offset the filter estimates (state X_BARO);
+* mag ``t, mx, my, mz (body FRD, calibrated, any unit), sigma (rad)``:
+  heading through kalman.mag_heading with the given declination;
+* static ``t0, t1, sigma_v (m/s), sigma_w (rad/s)``: at rest in [t0, t1]:
+  a ZUPT at every attitude update inside, and at the first update at or
+  after t1 a ZARU with the mean raw gyro rate of the IMU rows inside
+  (sigma_w <= 0: gyro ARW / sqrt(window)). The ZARU's variance also holds
+  the bias's own walk between the window's mean and its end, ``(2
+  sigma_gm^2 / tau + K^2) T / 3`` (a random walk's end minus its mean over
+  T); the correlation between the averaged gyro noise and the attitude
+  error it also drove is neglected.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from . import kalman as kf
+from . import strapdown as sd
+from .errmodel import (
+    NX,
+    SP_ACC_GM,
+    SP_ACC_TAU,
+    SP_GYRO_ARW,
+    SP_GYRO_GM,
+    SP_GYRO_RRW,
+    SP_GYRO_TAU,
+    X_BA,
+    X_BG,
+    X_DP,
+    X_DV,
+    X_GA,
+    X_GG,
+    X_PHI,
+    ImuSpec,
+    discretise,
+    make_spec,
+    system_matrix,
+)
+from .jit import kernel
+from .runner import initial_state
+
+K_GNSS_POS = 0
+K_GNSS_VEL = 1
+K_BARO = 2
+K_MAG = 3
+K_ZUPT = 4
+K_ZARU = 5
+KIND_NAMES = ("gnss_pos", "gnss_vel", "baro", "mag", "zupt", "zaru")
+
+GNSS_COLUMNS = ("t", "lat", "lon", "h", "vn", "ve", "vd", "sigma_h", "sigma_v", "sigma_vel")
+BARO_COLUMNS = ("t", "h", "sigma")
+MAG_COLUMNS = ("t", "mx", "my", "mz", "sigma")
+STATIC_COLUMNS = ("t0", "t1", "sigma_v", "sigma_w")
+LOG_COLUMNS = ("t", "kind", "nis", "dof", "accepted", "ratio")
+
+FILTER_COLUMNS = (
+    "sigma_n", "sigma_e", "sigma_d",
+    "sigma_vn", "sigma_ve", "sigma_vd",
+    "sigma_att_n", "sigma_att_e", "sigma_att_d",
+    "bg_x", "bg_y", "bg_z",
+    "ba_x", "ba_y", "ba_z",
+    "sigma_bg_x", "sigma_bg_y", "sigma_bg_z",
+    "sigma_ba_x", "sigma_ba_y", "sigma_ba_z",
+)  # fmt: skip
+OUT_COLUMNS = sd.OUT_COLUMNS + FILTER_COLUMNS
+OUT_SIZE = len(OUT_COLUMNS)  # 35: the contract's 14 solution and 21 filter columns
+
+DEFAULT_SIGMA_H = 2.5  # m (CONVENTIONS.md GNSS file)
+DEFAULT_SIGMA_V = 5.0  # m
+DEFAULT_SIGMA_VEL = 0.3  # m/s
+DEFAULT_SIGMA_BARO = 0.5  # m
+DEFAULT_SIGMA_MAG = math.radians(3.0)  # rad
+DEFAULT_SIGMA_ZUPT = 0.01  # m/s
+_DEG_H = math.degrees(1.0) * 3600.0  # rad/s -> deg/h
+
+
+@kernel
+def _propagate(s: np.ndarray, cfg: np.ndarray, spec: np.ndarray, P: np.ndarray, acc: np.ndarray) -> None:
+    """Propagate P over the pending interval ``acc[12]`` with its mean C (acc[0:9]) and f^n (acc[9:12])."""
+    T = acc[12]
+    if not T > 0.0:
+        return
+    c = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            c[i, j] = acc[3 * i + j] / T
+    f_n = acc[9:12] / T
+    lat, lon, h = sd.position(s, cfg)
+    F = system_matrix(c, s[sd.S_V : sd.S_V + 3], lat, h, f_n, spec, cfg[sd.CFG_EARTH] > 0.5)
+    phi, qd = discretise(F, spec, T)
+    kf.predict(P, phi, qd)
+    for i in range(13):
+        acc[i] = 0.0
+
+
+@kernel
+def flush_propagation(s: np.ndarray, cfg: np.ndarray, spec: np.ndarray, P: np.ndarray, acc: np.ndarray) -> None:
+    """Propagate P over what has accumulated since the last propagation (before an update)."""
+    _propagate(s, cfg, spec, P, acc)
+
+
+@kernel
+def after_k_update(s: np.ndarray, cfg: np.ndarray, spec: np.ndarray, P: np.ndarray, bias: np.ndarray,
+                   acc: np.ndarray, sums: np.ndarray, predict_every: int) -> float:
+    """The filter's share of one attitude (k) update, shared by the batch and the live paths.
+
+    ``sums`` holds the bias-corrected angle (0:3, rad) and velocity (3:6, m/s)
+    increments summed since the last update and (6) the time of that update;
+    they are turned into the interval's mean C_b^n and specific force in n,
+    accumulated in ``acc`` for the next propagation, and reset. The
+    Gauss-Markov bias estimates decay over the interval (their expected value,
+    errmodel.py), and P is propagated every ``predict_every`` updates.
+    Returns the interval T (s).
+    """
+    tk = s[sd.S_T]
+    T = tk - sums[6]
+    sums[6] = tk
+    c = s[sd.S_C : sd.S_C + 9]
+    for a in range(3):
+        acc[9 + a] += c[3 * a] * sums[3] + c[3 * a + 1] * sums[4] + c[3 * a + 2] * sums[5]
+    for a in range(9):
+        acc[a] += c[a] * T
+    acc[12] += T
+    for a in range(6):
+        sums[a] = 0.0
+    if spec[SP_GYRO_GM] > 0.0:
+        e = np.exp(-T / spec[SP_GYRO_TAU])
+        for a in range(3):
+            bias[kf.B_GG + a] *= e
+    if spec[SP_ACC_GM] > 0.0:
+        e = np.exp(-T / spec[SP_ACC_TAU])
+        for a in range(3):
+            bias[kf.B_GA + a] *= e
+    if int(s[sd.S_NK]) % predict_every == 0:
+        _propagate(s, cfg, spec, P, acc)
+    return T
+
+
+@kernel
+def push_rate_aided(s: np.ndarray, cfg: np.ndarray, spec: np.ndarray, P: np.ndarray, bias: np.ndarray,
+                    acc: np.ndarray, sums: np.ndarray, t: float, wx: float, wy: float, wz: float, fx: float,
+                    fy: float, fz: float, predict_every: int) -> int:
+    """The live path: one rate sample (rad/s, m/s^2, FRD) with the bias estimates subtracted,
+    through strapdown.push_rate_scalars, then :func:`after_k_update` when it completed a k
+    update. Same return codes as push_rate_scalars."""
+    dt = t - s[sd.S_TJ]
+    bgx, bgy, bgz = bias[kf.B_BG] + bias[kf.B_GG], bias[kf.B_BG + 1] + bias[kf.B_GG + 1], \
+        bias[kf.B_BG + 2] + bias[kf.B_GG + 2]
+    bax, bay, baz = bias[kf.B_BA] + bias[kf.B_GA], bias[kf.B_BA + 1] + bias[kf.B_GA + 1], \
+        bias[kf.B_BA + 2] + bias[kf.B_GA + 2]
+    r = sd.push_rate_scalars(s, cfg, t, wx - bgx, wy - bgy, wz - bgz, fx - bax, fy - bay, fz - baz)
+    if r < 0:
+        return r
+    if dt > 0.0:
+        sums[0] += (wx - bgx) * dt
+        sums[1] += (wy - bgy) * dt
+        sums[2] += (wz - bgz) * dt
+        sums[3] += (fx - bax) * dt
+        sums[4] += (fy - bay) * dt
+        sums[5] += (fz - baz) * dt
+    if r == 1:
+        after_k_update(s, cfg, spec, P, bias, acc, sums, predict_every)
+    return r
+
+
+@kernel
+def _record(
+    log: np.ndarray, n_log: int, counts: np.ndarray, t: float, kind: int, dof: int, nis: float, ratio: float, ok: bool
+) -> int:
+    """Count one measurement and log it while the log has room; returns the new log length."""
+    if ok:
+        counts[kind, 0] += 1
+    else:
+        counts[kind, 1] += 1
+    if n_log < log.shape[0]:
+        log[n_log, 0] = t
+        log[n_log, 1] = kind
+        log[n_log, 2] = nis
+        log[n_log, 3] = dof
+        log[n_log, 4] = 1.0 if ok else 0.0
+        log[n_log, 5] = ratio
+        return n_log + 1
+    return n_log
+
+
+@kernel
+def filter_row(P: np.ndarray, bias: np.ndarray, out: np.ndarray) -> None:
+    """Write the 21 filter columns (kernel units) after the 14 solution columns of ``out``."""
+    for i in range(3):
+        out[14 + i] = np.sqrt(P[X_DP + i, X_DP + i])
+        out[17 + i] = np.sqrt(P[X_DV + i, X_DV + i])
+        out[20 + i] = np.sqrt(P[X_PHI + i, X_PHI + i])
+        out[23 + i] = bias[kf.B_BG + i] + bias[kf.B_GG + i]
+        out[26 + i] = bias[kf.B_BA + i] + bias[kf.B_GA + i]
+        g, a = X_BG + i, X_GG + i
+        out[29 + i] = np.sqrt(max(P[g, g] + P[a, a] + 2.0 * P[g, a], 0.0))
+        g, a = X_BA + i, X_GA + i
+        out[32 + i] = np.sqrt(max(P[g, g] + P[a, a] + 2.0 * P[g, a], 0.0))
+
+
+@kernel
+def run_aided(
+    s: np.ndarray,
+    cfg: np.ndarray,
+    t: np.ndarray,
+    dtheta: np.ndarray,
+    dv: np.ndarray,
+    gnss: np.ndarray,
+    baro: np.ndarray,
+    mag: np.ndarray,
+    static: np.ndarray,
+    spec: np.ndarray,
+    lever: np.ndarray,
+    declination: float,
+    gate: float,
+    predict_every: int,
+    P: np.ndarray,
+    bias: np.ndarray,
+    out: np.ndarray,
+    counts: np.ndarray,
+    log: np.ndarray,
+    p_hist: np.ndarray,
+    p_every: int,
+) -> tuple[int, int]:
+    """Batch aided navigation over increment rows; returns (output rows, NIS log rows).
+
+    ``s``, ``P`` (NX x NX) and ``bias`` (kalman.B_SIZE) are updated in place
+    and can be passed to a following call over the next rows; measurement
+    rows at or before the state's last update are then skipped (a fresh
+    state uses those at its own time), and a rest interval must lie within
+    one call.
+    ``out`` needs ``len(t) // N``
+    rows of OUT_SIZE; ``counts`` is (6, 2) accepted/rejected per kind
+    (KIND_NAMES), ``log`` (L, 6) receives ``t, kind, nis, dof, accepted,
+    ratio`` per measurement while it has room. ``p_hist`` (H, NX, NX)
+    receives P after every ``p_every``-th output row (rows p_every - 1,
+    2 p_every - 1, ...) while it has room; pass an empty array to skip. Row
+    layouts in the module docstring.
+    """
+    t_start = s[sd.S_T]
+    cont = s[sd.S_NK] > 0.0  # a continued run: rows at its time were used by the call before
+    ig = 0
+    while ig < gnss.shape[0] and (gnss[ig, 0] < t_start or (cont and gnss[ig, 0] == t_start)):
+        ig += 1
+    ib = 0
+    while ib < baro.shape[0] and (baro[ib, 0] < t_start or (cont and baro[ib, 0] == t_start)):
+        ib += 1
+    im = 0
+    while im < mag.shape[0] and (mag[im, 0] < t_start or (cont and mag[im, 0] == t_start)):
+        im += 1
+    iz = 0
+    while iz < static.shape[0] and static[iz, 1] < t_start:
+        iz += 1
+    gm_g = spec[SP_GYRO_GM] > 0.0
+    acc = np.zeros(13)
+    sums = np.zeros(7)
+    sums[6] = s[sd.S_T]
+    raw_sum = np.zeros(3)
+    raw_t = 0.0
+    dth_c = np.empty(3)
+    dv_c = np.empty(3)
+    w_ib = np.zeros(3)
+    v_m = np.empty(3)
+    m_b = np.empty(3)
+    n_out = 0
+    n_log = 0
+    for i in range(t.shape[0]):
+        dt = t[i] - s[sd.S_TJ]
+        if not dt > 0.0:
+            continue
+        for a in range(3):
+            dth_c[a] = dtheta[i, a] - (bias[kf.B_BG + a] + bias[kf.B_GG + a]) * dt
+            dv_c[a] = dv[i, a] - (bias[kf.B_BA + a] + bias[kf.B_GA + a]) * dt
+            sums[a] += dth_c[a]
+            sums[3 + a] += dv_c[a]
+        if iz < static.shape[0] and static[iz, 0] < t[i] <= static[iz, 1]:
+            for a in range(3):
+                raw_sum[a] += dtheta[i, a]
+            raw_t += dt
+        if sd.push_increment(s, cfg, t[i], dth_c, dv_c) != 1:
+            continue
+        tk = s[sd.S_T]
+        T = tk - sums[6]
+        for a in range(3):
+            w_ib[a] = sums[a] / T
+        after_k_update(s, cfg, spec, P, bias, acc, sums, predict_every)
+
+        while ig < gnss.shape[0] and gnss[ig, 0] <= tk:
+            _propagate(s, cfg, spec, P, acc)
+            row = gnss[ig]
+            late = tk - row[0]
+            if np.isfinite(row[1]) and np.isfinite(row[2]) and np.isfinite(row[3]):
+                nu, H, R = kf.gnss_position(s, cfg, row[1], row[2], row[3], lever, late, row[7], row[8])
+                nis, ratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate)
+                n_log = _record(log, n_log, counts, row[0], K_GNSS_POS, nu.shape[0], nis, ratio, ok)
+            if np.isfinite(row[4]) and np.isfinite(row[5]) and np.isfinite(row[6]):
+                v_m[0], v_m[1], v_m[2] = row[4], row[5], row[6]
+                nu, H, R = kf.gnss_velocity(s, v_m, w_ib, lever, late, T, row[9])
+                nis, ratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate)
+                n_log = _record(log, n_log, counts, row[0], K_GNSS_VEL, nu.shape[0], nis, ratio, ok)
+            ig += 1
+        while ib < baro.shape[0] and baro[ib, 0] <= tk:
+            _propagate(s, cfg, spec, P, acc)
+            if np.isfinite(baro[ib, 1]):
+                nu, H, R = kf.baro_height(s, bias, baro[ib, 1], tk - baro[ib, 0], baro[ib, 2])
+                nis, ratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate)
+                n_log = _record(log, n_log, counts, baro[ib, 0], K_BARO, 1, nis, ratio, ok)
+            ib += 1
+        while im < mag.shape[0] and mag[im, 0] <= tk:
+            _propagate(s, cfg, spec, P, acc)
+            m_b[0], m_b[1], m_b[2] = mag[im, 1], mag[im, 2], mag[im, 3]
+            if np.isfinite(m_b[0]) and np.isfinite(m_b[1]) and np.isfinite(m_b[2]):
+                nu, H, R = kf.mag_heading(s, m_b, declination, mag[im, 4])
+                nis, ratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate)
+                n_log = _record(log, n_log, counts, mag[im, 0], K_MAG, 1, nis, ratio, ok)
+            im += 1
+        while iz < static.shape[0] and static[iz, 0] <= tk:
+            if tk <= static[iz, 1]:
+                _propagate(s, cfg, spec, P, acc)
+                nu, H, R = kf.zupt(s, static[iz, 2])
+                nis, ratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate)
+                n_log = _record(log, n_log, counts, tk, K_ZUPT, nu.shape[0], nis, ratio, ok)
+            if tk < static[iz, 1]:
+                break
+            if raw_t > 0.0:
+                _propagate(s, cfg, spec, P, acc)
+                sig = static[iz, 3]
+                if not sig > 0.0:
+                    sig = spec[SP_GYRO_ARW] / np.sqrt(raw_t)
+                nu, H, R = kf.zaru(s, cfg, bias, raw_sum / raw_t, sig)
+                # the window mean differs from the bias at its end by the bias's own walk:
+                # variance (2 sigma_gm^2 / tau + K^2) T / 3 per axis over a window of T
+                walk = spec[SP_GYRO_RRW] ** 2
+                if gm_g:
+                    walk += 2.0 * spec[SP_GYRO_GM] ** 2 / spec[SP_GYRO_TAU]
+                for a in range(3):
+                    R[a, a] += walk * raw_t / 3.0
+                nis, ratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate)
+                n_log = _record(log, n_log, counts, tk, K_ZARU, nu.shape[0], nis, ratio, ok)
+            for a in range(3):
+                raw_sum[a] = 0.0
+            raw_t = 0.0
+            iz += 1
+
+        row_out = out[n_out]
+        sd.solution_row(s, cfg, row_out[0:14])
+        filter_row(P, bias, row_out)
+        n_out += 1
+        if n_out % p_every == 0:
+            j = n_out // p_every - 1
+            if j < p_hist.shape[0]:
+                p_hist[j, :, :] = P
+    _propagate(s, cfg, spec, P, acc)  # P at the state's time for a following call
+    return n_out, n_log
+
+
+def _columns(rows: Any, width: int, defaults: Sequence[float], name: str) -> np.ndarray:
+    """Rows padded to ``width`` columns; missing columns and NaN sigmas take ``defaults`` (None = NaN)."""
+    if rows is None:
+        return np.empty((0, width))
+    arr = np.atleast_2d(np.asarray(rows, dtype=np.float64))
+    if arr.size == 0:
+        return np.empty((0, width))
+    if arr.shape[1] > width:
+        raise ValueError(f"{name}: at most {width} columns, got {arr.shape[1]}")
+    out = np.full((arr.shape[0], width), np.nan)
+    out[:, : arr.shape[1]] = arr
+    for j, d in enumerate(defaults):
+        if d is not None:
+            col = out[:, j]
+            col[~np.isfinite(col)] = d
+    if np.any(np.diff(out[:, 0]) < 0.0):
+        raise ValueError(f"{name}: rows must be sorted by time")
+    return np.ascontiguousarray(out)
+
+
+def to_file_units(rows: np.ndarray) -> np.ndarray:
+    """Aided rows in kernel units to the contract's file units.
+
+    Degrees for lat, lon, Euler angles and sigma_att; deg/h for the gyro bias
+    and its sigma; everything else unchanged.
+    """
+    out = rows.copy()
+    out[:, [1, 2, 7, 8, 9, 20, 21, 22]] = np.degrees(out[:, [1, 2, 7, 8, 9, 20, 21, 22]])
+    out[:, 23:26] *= _DEG_H
+    out[:, 29:32] *= _DEG_H
+    return out
+
+
+def navigate_aided(
+    imu: np.ndarray,
+    init: Mapping[str, float],
+    gnss: np.ndarray | None = None,
+    baro: np.ndarray | None = None,
+    *,
+    mag: np.ndarray | None = None,
+    static: np.ndarray | Sequence[Sequence[float]] | None = None,
+    spec: str | ImuSpec | Mapping[str, float] = "consumer",
+    lever_arm: Sequence[float] = (0.0, 0.0, 0.0),
+    gate: float = 5.0,
+    samples: int = 2,
+    predict_every: int = 1,
+    declination: float = 0.0,
+    baro_offset_sigma: float = 50.0,
+    baro_drift: float = 0.0,
+    covariance_every: int = 0,
+    file_units: bool = True,
+    **options: Any,
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """Aided navigation over a whole recording.
+
+    Args:
+        imu: (N, 7) increment rows ``t, dtheta_xyz (rad), dv_xyz (m/s)``.
+        init: the contract's initial state (degrees, m, m/s), optionally with
+            ``sigma_pos`` (m, default 10), ``sigma_vel`` (m/s, 1),
+            ``sigma_level`` (deg, 1), ``sigma_yaw`` (deg, 10).
+        gnss: rows ``t, lat, lon (deg), h (m)`` optionally followed by
+            ``vn, ve, vd (m/s), sigma_h, sigma_v (m), sigma_vel (m/s)``
+            (defaults 2.5, 5, 0.3; NaN position = no fix, NaN velocity = none).
+        baro: rows ``t, h (m)`` optionally ``sigma`` (m, default 0.5).
+        mag: rows ``t, mx, my, mz`` (calibrated, body FRD) optionally
+            ``sigma`` (deg of heading, default 3).
+        static: rows ``t0, t1`` optionally ``sigma_v`` (m/s, default 0.01),
+            ``sigma_w`` (deg/h; default ARW / sqrt(window)): rest intervals
+            for ZUPT and ZARU.
+        spec: a grade name, an ImuSpec or the contract's spec keys.
+        lever_arm: GNSS antenna from the IMU, body FRD (m).
+        gate: reject above this many sigma (normalised innovation); <= 0 off.
+        samples: samples per attitude update (strapdown N).
+        predict_every: attitude updates per covariance propagation.
+        declination: magnetic declination (deg, east positive).
+        baro_offset_sigma: initial 1-sigma of the baro offset (m).
+        baro_drift: random walk of the baro offset (m/sqrt(s)).
+        covariance_every: keep the full P after every this many output rows
+            (stats ``P_history``, (M // covariance_every, NX, NX)); 0 = none.
+        file_units: return rows in file units (:func:`to_file_units`), else kernel units.
+        options: other strapdown.make_config options.
+
+    Returns:
+        ``(rows, stats)``: (M, 35) output rows, and ``counts`` (kind ->
+        (accepted, rejected)), ``nis`` (log rows, LOG_COLUMNS), ``P`` (final),
+        ``bias`` (kalman.B_* layout), ``baro_offset`` (m), ``P_history``,
+        ``state`` (s).
+    """
+    cfg = sd.make_config(samples=samples, **options)
+    if predict_every < 1:
+        raise ValueError("predict_every must be >= 1")
+    sp = make_spec(spec, baro_drift)
+    s = initial_state(init)
+    imu = np.asarray(imu, dtype=np.float64)
+    if imu.ndim != 2 or imu.shape[1] != 7:
+        raise ValueError(f"imu must have shape (N, 7), got {imu.shape}")
+    t = np.ascontiguousarray(imu[:, 0])
+    dth = np.ascontiguousarray(imu[:, 1:4])
+    dvel = np.ascontiguousarray(imu[:, 4:7])
+
+    g = _columns(gnss, 10, (None,) * 7 + (DEFAULT_SIGMA_H, DEFAULT_SIGMA_V, DEFAULT_SIGMA_VEL), "gnss")
+    g[:, 1:3] = np.radians(g[:, 1:3])
+    b = _columns(baro, 3, (None, None, DEFAULT_SIGMA_BARO), "baro")
+    m = _columns(mag, 5, (None, None, None, None, math.degrees(DEFAULT_SIGMA_MAG)), "mag")
+    m[:, 4] = np.radians(m[:, 4])
+    z = _columns(static, 4, (None, None, DEFAULT_SIGMA_ZUPT, 0.0), "static")
+    z[:, 3] /= _DEG_H
+
+    P = kf.initial_covariance(
+        sp,
+        float(init.get("sigma_pos", 10.0)),
+        float(init.get("sigma_vel", 1.0)),
+        math.radians(float(init.get("sigma_level", 1.0))),
+        math.radians(float(init.get("sigma_yaw", 10.0))),
+        float(baro_offset_sigma),
+    )
+    bias = np.zeros(kf.B_SIZE)
+    lever = np.asarray(lever_arm, dtype=np.float64).reshape(3)
+    n_out = t.shape[0] // int(cfg[sd.CFG_SAMPLES]) + 1
+    out = np.empty((n_out, OUT_SIZE))
+    counts = np.zeros((len(KIND_NAMES), 2), dtype=np.int64)
+    log = np.empty((2 * g.shape[0] + b.shape[0] + m.shape[0] + n_out + z.shape[0], len(LOG_COLUMNS)))
+    if covariance_every < 0:
+        raise ValueError("covariance_every must be >= 0")
+    p_every = int(covariance_every) if covariance_every > 0 else n_out + 1
+    p_hist = np.zeros((n_out // p_every if covariance_every > 0 else 0, NX, NX))
+    rows, n_log = run_aided(
+        s, cfg, t, dth, dvel, g, b, m, z, sp, lever, math.radians(declination), float(gate), int(predict_every),
+        P, bias, out, counts, log, p_hist, p_every,
+    )
+    result = out[:rows]
+    stats: dict[str, Any] = {
+        "counts": {name: (int(counts[k, 0]), int(counts[k, 1])) for k, name in enumerate(KIND_NAMES)},
+        "nis": log[:n_log],
+        "P": P,
+        "bias": bias,
+        "baro_offset": float(bias[kf.B_BARO]),
+        "P_history": p_hist[: rows // p_every] if covariance_every > 0 else p_hist,
+        "state": s,
+    }
+    return (to_file_units(result) if file_units else result), stats
+
+
+__all__ = [
+    "BARO_COLUMNS",
+    "GNSS_COLUMNS",
+    "KIND_NAMES",
+    "LOG_COLUMNS",
+    "MAG_COLUMNS",
+    "NX",
+    "OUT_COLUMNS",
+    "OUT_SIZE",
+    "STATIC_COLUMNS",
+    "filter_row",
+    "navigate_aided",
+    "run_aided",
+    "to_file_units",
+]

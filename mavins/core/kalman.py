@@ -1,0 +1,496 @@
+"""Error-state Kalman filter kernels: prediction, gated update, closed-loop feedback, measurements.
+
+The error state ``x`` and its layout are errmodel.py's (estimate minus truth).
+The filter runs closed loop: after every accepted update the estimate is fed
+back into the strapdown state ``s`` (strapdown.py's ``S_*`` layout) and into
+the bias vector ``bias``, and ``x`` is reset to zero, so between updates the
+error-state estimate is always zero and only P is propagated.
+
+Bias vector ``bias`` (``B_*``, the filter's nominal bias estimates, subtracted
+from the IMU data): ``[bg_const(3) rad/s, ba_const(3) m/s^2, bg_gm(3),
+ba_gm(3), baro_offset m]``; ``bias[i]`` corrects ``x[X_BG + i]``. The bias
+the sensor carries is ``const + gm`` per axis.
+
+Innovations are *predicted minus measured*, ``nu = h(est) - z``, so that
+``nu = H x + noise`` with x = estimate minus truth; the update is then
+``x += K (nu - H x)``, ``K = P H^T S^-1``, ``S = H P H^T + R``, and P takes
+Joseph's form ``(I - K H) P (I - K H)^T + K R K^T``.
+
+Gate (CONVENTIONS.md ``--gate N``): a measurement is rejected when any
+component's normalised innovation ``|nu_i - (H x)_i| / sqrt(S_ii)`` exceeds
+N (sigma). The returned test ratio is the largest of them divided by N
+(below 1 passes); the NIS ``nu^T S^-1 nu`` is returned for consistency tests
+(chi-square with dim(nu) degrees of freedom for a consistent filter).
+
+Measurement time: a fix stamped ``t_m`` is used at the first attitude update
+``t_k >= t_m``, after the IMU solution has passed it. The solution is taken
+back to ``t_m`` along the current velocity, ``p(t_m) = p(t_k) - v (t_k -
+t_m)`` (and ``v(t_m)`` by interpolation between the last two updates), which
+adds ``-(t_k - t_m)`` on the dv columns of the position H. With t_k - t_m
+under one attitude interval the neglected acceleration term is ``a dt^2/2``
+(below a millimetre at 50 Hz).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import earth
+from . import strapdown as sd
+from .errmodel import (
+    NX,
+    SP_ACC_BIAS,
+    SP_ACC_GM,
+    SP_GYRO_BIAS,
+    SP_GYRO_GM,
+    X_BA,
+    X_BARO,
+    X_BG,
+    X_DP,
+    X_DV,
+    X_GA,
+    X_GG,
+    X_PHI,
+    matmul,
+    matmul_bt,
+)
+from .jit import kernel
+from .rotation import mat_vec, quat_mul, quat_to_dcm, rotvec_to_dcm, rotvec_to_quat, wrap_pi
+
+B_BG = 0
+B_BA = 3
+B_GG = 6
+B_GA = 9
+B_BARO = 12
+B_SIZE = 13
+
+
+@kernel
+def symmetrise(P: np.ndarray) -> None:
+    """Replace P by ``(P + P^T) / 2`` in place."""
+    n = P.shape[0]
+    for i in range(n):
+        for j in range(i + 1, n):
+            m = 0.5 * (P[i, j] + P[j, i])
+            P[i, j] = m
+            P[j, i] = m
+
+
+@kernel
+def predict(P: np.ndarray, phi: np.ndarray, qd: np.ndarray) -> None:
+    """``P <- Phi P Phi^T + Qd`` in place, symmetrised."""
+    p_new = matmul_bt(matmul(phi, P), phi)
+    n = P.shape[0]
+    for i in range(n):
+        for j in range(n):
+            P[i, j] = p_new[i, j] + qd[i, j]
+    symmetrise(P)
+
+
+@kernel
+def _cholesky_inverse(S: np.ndarray) -> tuple[np.ndarray, bool]:
+    """Inverse of a small symmetric positive definite matrix (Cholesky); ok=False if not SPD."""
+    m = S.shape[0]
+    L = np.zeros((m, m))
+    for j in range(m):
+        d = S[j, j]
+        for k in range(j):
+            d -= L[j, k] * L[j, k]
+        if not d > 0.0:
+            return np.zeros((m, m)), False
+        L[j, j] = np.sqrt(d)
+        for i in range(j + 1, m):
+            a = S[i, j]
+            for k in range(j):
+                a -= L[i, k] * L[j, k]
+            L[i, j] = a / L[j, j]
+    # inverse of L (lower triangular), then S^-1 = L^-T L^-1
+    li = np.zeros((m, m))
+    for i in range(m):
+        li[i, i] = 1.0 / L[i, i]
+        for j in range(i):
+            a = 0.0
+            for k in range(j, i):
+                a -= L[i, k] * li[k, j]
+            li[i, j] = a / L[i, i]
+    inv = np.zeros((m, m))
+    for i in range(m):
+        for j in range(m):
+            a = 0.0
+            for k in range(max(i, j), m):
+                a += li[k, i] * li[k, j]
+            inv[i, j] = a
+    return inv, True
+
+
+@kernel
+def update(
+    x: np.ndarray, P: np.ndarray, H: np.ndarray, nu: np.ndarray, R: np.ndarray, gate: float
+) -> tuple[float, float, bool]:
+    """Gated Joseph-form update of x and P in place.
+
+    Returns ``(nis, ratio, accepted)``: the normalised innovation squared,
+    the largest normalised innovation component divided by ``gate`` (gate <= 0:
+    no gating, ratio is then the largest normalised component itself), and
+    whether the update was applied.
+    """
+    n = x.shape[0]
+    m = nu.shape[0]
+    pht = matmul_bt(P, H)
+    S = matmul(H, pht)
+    for i in range(m):
+        for j in range(m):
+            S[i, j] += R[i, j]
+    y = nu.copy()
+    for i in range(m):
+        for j in range(n):
+            y[i] -= H[i, j] * x[j]
+    sinv, ok = _cholesky_inverse(S)
+    if not ok:
+        return np.inf, np.inf, False
+    nis = 0.0
+    for i in range(m):
+        for j in range(m):
+            nis += y[i] * sinv[i, j] * y[j]
+    worst = 0.0
+    for i in range(m):
+        z = abs(y[i]) / np.sqrt(S[i, i])
+        if not z <= worst:
+            worst = z
+    ratio = worst / gate if gate > 0.0 else worst
+    if not np.isfinite(nis) or (gate > 0.0 and not ratio <= 1.0):
+        return nis, ratio, False
+    K = matmul(pht, sinv)
+    for i in range(n):
+        for j in range(m):
+            x[i] += K[i, j] * y[j]
+    A = -matmul(K, H)
+    for i in range(n):
+        A[i, i] += 1.0
+    p_new = matmul_bt(matmul(A, P), A)
+    krk = matmul_bt(matmul(K, R), K)
+    for i in range(n):
+        for j in range(n):
+            P[i, j] = p_new[i, j] + krk[i, j]
+    symmetrise(P)
+    return nis, ratio, True
+
+
+@kernel
+def feedback(s: np.ndarray, cfg: np.ndarray, bias: np.ndarray, x: np.ndarray) -> None:
+    """Correct the strapdown state and the biases by the error estimate, then zero x.
+
+    Attitude ``C <- exp(-[phi x]) C`` (``q <- r(-phi) (x) q``, the DCM from
+    the quaternion, so both stay consistent); velocity ``v -= dv`` at k and
+    at k-1 (S_VP: the mid-interval extrapolation and Simpson's rule then see
+    one consistent history); position
+    moved by ``-dp``: ``C_n^e <- C_n^e exp([xi x])`` with ``xi`` the transport
+    rotation of that displacement (as strapdown.k_update moves it), height
+    ``h <- h + dp_D``, and the latitude/longitude kept beside C_n^e
+    refreshed (strapdown.sync_position); biases ``bias -= x[X_BG:]``.
+    """
+    q = quat_mul(rotvec_to_quat(-x[X_PHI : X_PHI + 3]), s[sd.S_Q : sd.S_Q + 4])
+    qn = np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    for i in range(4):
+        s[sd.S_Q + i] = q[i] / qn
+    s[sd.S_C : sd.S_C + 9] = quat_to_dcm(s[sd.S_Q : sd.S_Q + 4]).ravel()
+    for i in range(3):
+        s[sd.S_V + i] -= x[X_DV + i]
+        s[sd.S_VP + i] -= x[X_DV + i]
+    if cfg[sd.CFG_EARTH] > 0.5:
+        lat, lon, h = sd.position(s, cfg)
+        r_n, r_e = earth.radii(lat)
+        dn = -x[X_DP]
+        de = -x[X_DP + 1]
+        xi = np.array([de / (r_e + h), -dn / (r_n + h), -de * np.tan(lat) / (r_e + h)])
+        cne = s[sd.S_CNE : sd.S_CNE + 9].reshape(3, 3)
+        new = np.empty((3, 3))
+        rot = rotvec_to_dcm(xi)
+        for i in range(3):
+            for j in range(3):
+                new[i, j] = cne[i, 0] * rot[0, j] + cne[i, 1] * rot[1, j] + cne[i, 2] * rot[2, j]
+        s[sd.S_CNE : sd.S_CNE + 9] = new.ravel()
+    else:
+        for i in range(3):
+            s[sd.S_PF + i] -= x[X_DP + i]
+    s[sd.S_H] += x[X_DP + 2]
+    sd.sync_position(s, cfg)
+    for i in range(B_SIZE):
+        bias[i] -= x[X_BG + i]
+    for i in range(x.shape[0]):
+        x[i] = 0.0
+
+
+@kernel
+def apply_update(
+    s: np.ndarray,
+    cfg: np.ndarray,
+    bias: np.ndarray,
+    P: np.ndarray,
+    H: np.ndarray,
+    nu: np.ndarray,
+    R: np.ndarray,
+    gate: float,
+) -> tuple[float, float, bool]:
+    """Gated update from a zero error state followed by feedback; returns (nis, ratio, accepted)."""
+    x = np.zeros(P.shape[0])
+    nis, ratio, ok = update(x, P, H, nu, R, gate)
+    if ok:
+        feedback(s, cfg, bias, x)
+    return nis, ratio, ok
+
+
+# --- measurement models: (nu, H, R) -----------------------------------------
+
+
+@kernel
+def metres_per_radian(s: np.ndarray, cfg: np.ndarray) -> tuple[float, float]:
+    """``(R_N + h, (R_E + h) cos L)``: metres per radian of latitude and of longitude.
+
+    In laboratory mode (earth = none) the start point's, as strapdown.position maps them.
+    """
+    if cfg[sd.CFG_EARTH] > 0.5:
+        lat, lon, h = sd.position(s, cfg)
+    else:
+        lat, h = s[sd.S_LAT0], s[sd.S_H0]
+    r_n, r_e = earth.radii(lat)
+    return r_n + h, (r_e + h) * np.cos(lat)
+
+
+@kernel
+def gnss_position(
+    s: np.ndarray,
+    cfg: np.ndarray,
+    lat_m: float,
+    lon_m: float,
+    h_m: float,
+    lever: np.ndarray,
+    dt: float,
+    sigma_h: float,
+    sigma_v: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Antenna position fix (rad, rad, m) taken ``dt`` = t_k - t_m >= 0 s before the solution.
+
+    ``p_ant = p + C_b^n l`` with the lever arm l (m, FRD). Innovation in NED
+    metres: ``nu = (p + C l - v dt) - p_m``; ``H = [-[(C l) x], -dt I, I, 0...]``
+    (``C(est) l - C l = phi x (C l)``). sigma_h per horizontal axis, sigma_v
+    vertical (m).
+    """
+    lat, lon, h = sd.position(s, cfg)
+    mn, me = metres_per_radian(s, cfg)
+    c = s[sd.S_C : sd.S_C + 9].reshape(3, 3)
+    la = mat_vec(c, lever)
+    nu = np.empty(3)
+    nu[0] = (lat - lat_m) * mn + la[0] - s[sd.S_V] * dt
+    nu[1] = wrap_pi(lon - lon_m) * me + la[1] - s[sd.S_V + 1] * dt
+    nu[2] = -(h - h_m) + la[2] - s[sd.S_V + 2] * dt
+    H = np.zeros((3, NX))
+    # -[la x]
+    H[0, X_PHI + 1] = la[2]
+    H[0, X_PHI + 2] = -la[1]
+    H[1, X_PHI] = -la[2]
+    H[1, X_PHI + 2] = la[0]
+    H[2, X_PHI] = la[1]
+    H[2, X_PHI + 1] = -la[0]
+    for i in range(3):
+        H[i, X_DV + i] = -dt
+        H[i, X_DP + i] = 1.0
+    R = np.zeros((3, 3))
+    R[0, 0] = sigma_h * sigma_h
+    R[1, 1] = sigma_h * sigma_h
+    R[2, 2] = sigma_v * sigma_v
+    return nu, H, R
+
+
+@kernel
+def gnss_velocity(
+    s: np.ndarray,
+    v_m: np.ndarray,
+    w_ib: np.ndarray,
+    lever: np.ndarray,
+    dt: float,
+    T: float,
+    sigma: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Antenna velocity fix (NED m/s) taken dt before the solution; T is the last attitude interval.
+
+    ``v_ant = v + C (w_ib x l)``; the Earth-rate term ``-w_in x (C l)`` (below
+    1e-4 m/s per metre of lever arm) is ignored. ``v(t_m)`` is interpolated
+    between the last two updates. ``w_ib`` is the bias-corrected body rate
+    (rad/s). ``H = [-[(C (w x l)) x], I, 0, C [l x], 0, C [l x], 0...]``: a
+    gyro bias error db changes the rate by -db, so the lever-arm velocity by
+    ``C (l x db)``.
+    """
+    c = s[sd.S_C : sd.S_C + 9].reshape(3, 3)
+    wl = np.empty(3)
+    wl[0] = w_ib[1] * lever[2] - w_ib[2] * lever[1]
+    wl[1] = w_ib[2] * lever[0] - w_ib[0] * lever[2]
+    wl[2] = w_ib[0] * lever[1] - w_ib[1] * lever[0]
+    cwl = mat_vec(c, wl)
+    a = dt / T if T > 0.0 else 0.0
+    nu = np.empty(3)
+    for i in range(3):
+        v_tm = s[sd.S_V + i] - a * (s[sd.S_V + i] - s[sd.S_VP + i])
+        nu[i] = v_tm + cwl[i] - v_m[i]
+    H = np.zeros((3, NX))
+    H[0, X_PHI + 1] = cwl[2]
+    H[0, X_PHI + 2] = -cwl[1]
+    H[1, X_PHI] = -cwl[2]
+    H[1, X_PHI + 2] = cwl[0]
+    H[2, X_PHI] = cwl[1]
+    H[2, X_PHI + 1] = -cwl[0]
+    # C [l x]
+    lx = np.zeros((3, 3))
+    lx[0, 1] = -lever[2]
+    lx[0, 2] = lever[1]
+    lx[1, 0] = lever[2]
+    lx[1, 2] = -lever[0]
+    lx[2, 0] = -lever[1]
+    lx[2, 1] = lever[0]
+    for i in range(3):
+        H[i, X_DV + i] = 1.0
+        for j in range(3):
+            e = c[i, 0] * lx[0, j] + c[i, 1] * lx[1, j] + c[i, 2] * lx[2, j]
+            H[i, X_BG + j] = e
+            H[i, X_GG + j] = e
+    R = np.zeros((3, 3))
+    for i in range(3):
+        R[i, i] = sigma * sigma
+    return nu, H, R
+
+
+@kernel
+def baro_height(
+    s: np.ndarray, bias: np.ndarray, h_m: float, dt: float, sigma: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Barometric height (m) = h + offset + noise, taken dt before the solution.
+
+    ``nu = h + v_D dt + offset - h_m``; ``H``: -1 on dp_D (dh = -dp_D),
+    +dt on dv_D, +1 on the offset.
+    """
+    nu = np.empty(1)
+    nu[0] = s[sd.S_H] + s[sd.S_V + 2] * dt + bias[B_BARO] - h_m
+    H = np.zeros((1, NX))
+    H[0, X_DP + 2] = -1.0
+    H[0, X_DV + 2] = dt
+    H[0, X_BARO] = 1.0
+    R = np.zeros((1, 1))
+    R[0, 0] = sigma * sigma
+    return nu, H, R
+
+
+@kernel
+def heading(s: np.ndarray, yaw_m: float, sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A yaw measurement (rad, ZYX Euler) with 1-sigma (rad).
+
+    With ``C(est) = (I + [phi x]) C``, ``yaw = atan2(C21, C11)`` changes by
+    ``dyaw = phi_D + tan(pitch) (phi_N cos yaw + phi_E sin yaw)``.
+    """
+    c = s[sd.S_C : sd.S_C + 9].reshape(3, 3)
+    yaw = np.arctan2(c[1, 0], c[0, 0])
+    hh = c[0, 0] * c[0, 0] + c[1, 0] * c[1, 0]
+    nu = np.empty(1)
+    nu[0] = wrap_pi(yaw - yaw_m)
+    H = np.zeros((1, NX))
+    H[0, X_PHI] = -c[2, 0] * c[0, 0] / hh
+    H[0, X_PHI + 1] = -c[2, 0] * c[1, 0] / hh
+    H[0, X_PHI + 2] = 1.0
+    R = np.zeros((1, 1))
+    R[0, 0] = sigma * sigma
+    return nu, H, R
+
+
+@kernel
+def mag_heading(
+    s: np.ndarray, m_b: np.ndarray, declination: float, sigma: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Heading from a calibrated magnetometer sample ``m_b`` (body FRD, any unit).
+
+    The sample is levelled with the full estimated attitude, ``m = C m_b``;
+    the measurement is the angle of its horizontal part east of north, which
+    must equal the declination (rad): ``nu = atan2(m_E, m_N) - declination``.
+    With ``m(est) = m + phi x m``, ``H_phi = -(1/|m_h|^2) [-m_E, m_N, 0] [m x]``,
+    which carries the coupling of tilt errors through the vertical field.
+    sigma (rad) is the heading noise, about sensor noise / horizontal field.
+    """
+    c = s[sd.S_C : sd.S_C + 9].reshape(3, 3)
+    m = mat_vec(c, m_b)
+    hh = m[0] * m[0] + m[1] * m[1]
+    nu = np.empty(1)
+    nu[0] = wrap_pi(np.arctan2(m[1], m[0]) - declination)
+    g0 = -m[1] / hh
+    g1 = m[0] / hh
+    # H_phi = -g^T [m x] with g = [g0, g1, 0]; g^T [m x] = [g1 m2, -g0 m2, g0 m1 - g1 m0]
+    H = np.zeros((1, NX))
+    H[0, X_PHI] = -(g1 * m[2])
+    H[0, X_PHI + 1] = -(-g0 * m[2])
+    H[0, X_PHI + 2] = -(g0 * m[1] - g1 * m[0])
+    R = np.zeros((1, 1))
+    R[0, 0] = sigma * sigma
+    return nu, H, R
+
+
+@kernel
+def zupt(s: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Zero-velocity update: the vehicle is at rest, v = 0 (sigma m/s per axis)."""
+    nu = np.empty(3)
+    H = np.zeros((3, NX))
+    R = np.zeros((3, 3))
+    for i in range(3):
+        nu[i] = s[sd.S_V + i]
+        H[i, X_DV + i] = 1.0
+        R[i, i] = sigma * sigma
+    return nu, H, R
+
+
+@kernel
+def zaru(
+    s: np.ndarray, cfg: np.ndarray, bias: np.ndarray, w_raw: np.ndarray, sigma: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Zero angular rate update: at rest the mean raw gyro rate ``w_raw`` (rad/s) is bias plus Earth rate.
+
+    ``z = w_raw - C^T w_ie^n`` measures the gyro bias (const + Gauss-Markov
+    part); ``nu = b(est) - z``, H = I on both bias parts. sigma (rad/s) per
+    axis, about ARW / sqrt(averaging time). The attitude error's effect on
+    ``C^T w_ie`` (phi times 7e-5 rad/s) is neglected, and so is the
+    correlation between the averaged gyro noise and the attitude error.
+    """
+    c = s[sd.S_C : sd.S_C + 9].reshape(3, 3)
+    w_ie = np.zeros(3)
+    if cfg[sd.CFG_EARTH] > 0.5:
+        lat, lon, h = sd.position(s, cfg)
+        w_ie = earth.earth_rate_n(lat)
+    nu = np.empty(3)
+    H = np.zeros((3, NX))
+    R = np.zeros((3, 3))
+    for i in range(3):
+        wb = c[0, i] * w_ie[0] + c[1, i] * w_ie[1] + c[2, i] * w_ie[2]
+        nu[i] = bias[B_BG + i] + bias[B_GG + i] - (w_raw[i] - wb)
+        H[i, X_BG + i] = 1.0
+        H[i, X_GG + i] = 1.0
+        R[i, i] = sigma * sigma
+    return nu, H, R
+
+
+@kernel
+def initial_covariance(
+    spec: np.ndarray, sigma_pos: float, sigma_vel: float, sigma_level: float, sigma_yaw: float, sigma_baro: float
+) -> np.ndarray:
+    """Diagonal initial P: position (m, each axis), velocity (m/s), level and yaw (rad), baro offset (m).
+
+    The bias blocks take the spec's initial 1-sigma (constant part) and the
+    stationary Gauss-Markov sigma.
+    """
+    P = np.zeros((NX, NX))
+    for i in range(3):
+        P[X_DP + i, X_DP + i] = sigma_pos * sigma_pos
+        P[X_DV + i, X_DV + i] = sigma_vel * sigma_vel
+        P[X_BG + i, X_BG + i] = spec[SP_GYRO_BIAS] ** 2
+        P[X_BA + i, X_BA + i] = spec[SP_ACC_BIAS] ** 2
+        P[X_GG + i, X_GG + i] = spec[SP_GYRO_GM] ** 2
+        P[X_GA + i, X_GA + i] = spec[SP_ACC_GM] ** 2
+    P[X_PHI, X_PHI] = sigma_level * sigma_level
+    P[X_PHI + 1, X_PHI + 1] = sigma_level * sigma_level
+    P[X_PHI + 2, X_PHI + 2] = sigma_yaw * sigma_yaw
+    P[X_BARO, X_BARO] = sigma_baro * sigma_baro
+    return P

@@ -1,0 +1,270 @@
+"""Aiding sensors for a simulated run: GNSS, barometer and magnetometer from the run's truth.
+
+Every generator reads a :class:`sim.generate.SimRun` (truth rows at the IMU
+times, columns of SimResult.TRUTH_COLUMNS, attitude of the IMU frame) and
+draws its noise from its own numpy Generator seeded from the run's seed
+(``SeedSequence(seed, spawn_key=(stream,))``, streams apart from the IMU
+error streams of sim/errors.py), so a run and its aiding data are
+reproducible and independent.
+
+Files (CONVENTIONS.md "Aided navigation"), written beside imu.csv:
+
+* ``gnss.csv``: ``t,lat,lon,h,vn,ve,vd,sigma_h,sigma_v,sigma_vel`` (deg, deg,
+  ellipsoidal m; m/s; m, m, m/s): the antenna's position and velocity, with
+  ``nan`` position and velocity during outages (a row whose position is NaN
+  is no fix);
+* ``baro.csv``: ``t,h,sigma`` (m): ellipsoidal height of the IMU plus a
+  constant offset, a random-walk drift and white noise;
+* ``mag.csv``: ``t,mx,my,mz`` (uT, body FRD): the Earth field of the given
+  declination and inclination seen by the IMU, plus hard iron and noise.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Sequence
+
+import numpy as np
+
+from mavins.core import earth
+from mavins.core.rotation import quat_to_dcm
+
+if TYPE_CHECKING:
+    from .generate import SimRun
+
+GNSS_COLUMNS = ("t", "lat", "lon", "h", "vn", "ve", "vd", "sigma_h", "sigma_v", "sigma_vel")
+BARO_COLUMNS = ("t", "h", "sigma")
+MAG_COLUMNS = ("t", "mx", "my", "mz")
+
+_STREAMS = {"gnss": 0x6E1, "baro": 0x6E2, "mag": 0x6E3}
+
+
+@dataclass(frozen=True)
+class GnssConfig:
+    """GNSS receiver model.
+
+    Attributes:
+        rate: fixes per second (Hz); fixes at ``t0 + k / rate``, k >= 1.
+        sigma_h: 1-sigma of each horizontal position axis (m).
+        sigma_v: 1-sigma of the vertical position (m).
+        sigma_vel: 1-sigma of each velocity axis (m/s).
+        velocity: also report velocity.
+        latency: uncompensated latency (s): the fix stamped t describes the
+            antenna at ``t - latency`` (an error source; 0 = time of validity).
+        lever_arm: antenna position from the IMU in the body frame FRD (m).
+        outages: ``(start, end)`` intervals (s) without a fix.
+    """
+
+    rate: float = 1.0
+    sigma_h: float = 1.0
+    sigma_v: float = 1.5
+    sigma_vel: float = 0.1
+    velocity: bool = True
+    latency: float = 0.0
+    lever_arm: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    outages: tuple[tuple[float, float], ...] = field(default_factory=tuple)
+
+
+@dataclass(frozen=True)
+class BaroConfig:
+    """Barometric altimeter: rate (Hz), white noise sigma (m), constant offset (m), drift (m/sqrt(s))."""
+
+    rate: float = 10.0
+    sigma: float = 0.5
+    offset: float = 0.0
+    drift: float = 0.0
+
+
+@dataclass(frozen=True)
+class MagConfig:
+    """Magnetometer: rate (Hz), field strength (uT), declination and inclination (deg,
+    east and down positive), noise sigma per axis (uT), hard-iron offset in FRD (uT)."""
+
+    rate: float = 10.0
+    strength: float = 48.0
+    declination: float = 2.0
+    inclination: float = 63.0
+    sigma: float = 0.3
+    hard_iron: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def field_n(self) -> np.ndarray:
+        """The Earth field in NED (uT)."""
+        d, i = math.radians(self.declination), math.radians(self.inclination)
+        return self.strength * np.array([math.cos(i) * math.cos(d), math.cos(i) * math.sin(d), math.sin(i)])
+
+
+@dataclass(frozen=True)
+class Aiding:
+    """Aiding rows of one run in file units (None = not generated)."""
+
+    gnss: np.ndarray | None = None
+    baro: np.ndarray | None = None
+    mag: np.ndarray | None = None
+
+    def write(self, outdir: Path) -> list[Path]:
+        """Write gnss.csv, baro.csv, mag.csv (those present) into outdir."""
+        return write_aiding(outdir, gnss=self.gnss, baro=self.baro, mag=self.mag)
+
+
+def _rng(run: "SimRun", stream: str) -> np.random.Generator:
+    return np.random.Generator(np.random.PCG64(np.random.SeedSequence(run.seed, spawn_key=(_STREAMS[stream],))))
+
+
+def _epochs(run: "SimRun", rate: float) -> np.ndarray:
+    if not rate > 0.0:
+        raise ValueError(f"rate must be positive, got {rate}")
+    t0 = float(run.exact.truth[0, 0])
+    t_end = float(run.exact.truth[-1, 0])
+    n = int(math.floor((t_end - t0) * rate + 1e-9))
+    return t0 + np.arange(1, n + 1) / rate
+
+
+def truth_at(run: "SimRun", times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Truth at arbitrary times inside the run: ``(lat_lon_h (rad, rad, m), v_ned, q_nb, w_ib_b)``.
+
+    Linear interpolation between truth rows (exact at the IMU sample times),
+    quaternions normalised after interpolation; the body rate is the
+    interval-mean rate of the exact increments, interpolated between interval
+    midpoints (rad/s).
+    """
+    tr = run.exact.truth
+    tt = tr[:, 0]
+    times = np.asarray(times, dtype=np.float64)
+    if times.size and (times.min() < tt[0] - 1e-9 or times.max() > tt[-1] + 1e-9):
+        raise ValueError("times outside the run")
+    pos = np.column_stack([np.interp(times, tt, np.radians(tr[:, 1])), np.interp(times, tt, np.radians(tr[:, 2])),
+                           np.interp(times, tt, tr[:, 3])])
+    vel = np.column_stack([np.interp(times, tt, tr[:, c]) for c in (4, 5, 6)])
+    q = tr[:, 10:14].copy()
+    flip = np.concatenate(([False], np.sum(q[1:] * q[:-1], axis=1) < 0.0))
+    q[np.cumsum(flip) % 2 == 1] *= -1.0
+    qi = np.column_stack([np.interp(times, tt, q[:, c]) for c in range(4)])
+    qi /= np.linalg.norm(qi, axis=1)[:, None]
+    t_imu = np.concatenate(([run.exact.t0], run.exact.t))
+    dt = np.diff(t_imu)
+    w = run.exact.dtheta / dt[:, None]
+    mid = 0.5 * (t_imu[:-1] + t_imu[1:])
+    wi = np.column_stack([np.interp(times, mid, w[:, c]) for c in range(3)])
+    return pos, vel, qi, wi
+
+
+def gnss(run: "SimRun", config: GnssConfig = GnssConfig()) -> np.ndarray:
+    """GNSS rows (GNSS_COLUMNS, file units) for a simulated run.
+
+    Antenna position ``p + C_b^n l`` and velocity ``v + C_b^n (w_ib x l) -
+    w_ie^n x (C_b^n l)`` (Earth-referenced lever-arm velocity), plus white
+    noise: N(0, sigma_h) per horizontal axis, N(0, sigma_v) vertical (metres,
+    mapped to lat/lon through the radii), N(0, sigma_vel) per velocity axis.
+    """
+    t = _epochs(run, config.rate)
+    t_valid = t - config.latency
+    t0 = float(run.exact.truth[0, 0])
+    t_valid = np.maximum(t_valid, t0)
+    pos, vel, q, w = truth_at(run, t_valid)
+    lever = np.asarray(config.lever_arm, dtype=np.float64)
+    rng = _rng(run, "gnss")
+    noise_p = rng.standard_normal((t.size, 3)) * np.array([config.sigma_h, config.sigma_h, config.sigma_v])
+    noise_v = rng.standard_normal((t.size, 3)) * config.sigma_vel
+    rows = np.empty((t.size, len(GNSS_COLUMNS)))
+    for k in range(t.size):
+        lat, lon, h = pos[k]
+        c = quat_to_dcm(q[k])
+        la = c @ lever
+        w_ie = earth.earth_rate_n(lat)
+        v_ant = vel[k] + c @ np.cross(w[k], lever) - np.cross(w_ie, la)
+        r_n, r_e = earth.radii(lat)
+        d = la + noise_p[k]
+        rows[k, 0] = t[k]
+        rows[k, 1] = math.degrees(lat + d[0] / (r_n + h))
+        rows[k, 2] = math.degrees(lon + d[1] / ((r_e + h) * math.cos(lat)))
+        rows[k, 3] = h - d[2]
+        rows[k, 4:7] = v_ant + noise_v[k] if config.velocity else np.nan
+    rows[:, 7] = config.sigma_h
+    rows[:, 8] = config.sigma_v
+    rows[:, 9] = config.sigma_vel
+    for start, end in config.outages:
+        out = (t >= start) & (t < end)
+        rows[out, 1:7] = np.nan
+    return rows
+
+
+def baro(run: "SimRun", config: BaroConfig = BaroConfig()) -> np.ndarray:
+    """Barometer rows ``t, h, sigma`` (m): IMU height + offset + random-walk drift + white noise."""
+    t = _epochs(run, config.rate)
+    pos, _, _, _ = truth_at(run, t)
+    rng = _rng(run, "baro")
+    dt = np.diff(t, prepend=float(run.exact.truth[0, 0]))
+    drift = np.cumsum(config.drift * np.sqrt(dt) * rng.standard_normal(t.size))
+    noise = config.sigma * rng.standard_normal(t.size)
+    return np.column_stack([t, pos[:, 2] + config.offset + drift + noise, np.full(t.size, config.sigma)])
+
+
+def magnetometer(run: "SimRun", config: MagConfig = MagConfig()) -> np.ndarray:
+    """Magnetometer rows ``t, mx, my, mz`` (uT, FRD): ``C_n^b m^n + hard iron + noise``."""
+    t = _epochs(run, config.rate)
+    _, _, q, _ = truth_at(run, t)
+    m_n = config.field_n()
+    rng = _rng(run, "mag")
+    noise = config.sigma * rng.standard_normal((t.size, 3))
+    hard = np.asarray(config.hard_iron, dtype=np.float64)
+    rows = np.empty((t.size, 4))
+    rows[:, 0] = t
+    for k in range(t.size):
+        rows[k, 1:4] = quat_to_dcm(q[k]).T @ m_n + hard + noise[k]
+    return rows
+
+
+def mag_heading(m_b: Sequence[float], roll: float, pitch: float, declination: float) -> float:
+    """Yaw (rad) from a calibrated magnetometer sample, tilt-compensated with roll and pitch (rad).
+
+    With ``C_b^n = Rz(yaw) Ry(pitch) Rx(roll)`` the levelled field ``m_l =
+    Ry(pitch) Rx(roll) m_b`` points ``declination - yaw`` east of the level
+    x axis, so ``yaw = declination - atan2(m_l,y, m_l,x)`` (declination in rad).
+    """
+    cr, sr = math.cos(roll), math.sin(roll)
+    cp, sp = math.cos(pitch), math.sin(pitch)
+    mx, my, mz = (float(v) for v in m_b)
+    y1 = cr * my - sr * mz
+    z1 = sr * my + cr * mz
+    x2 = cp * mx + sp * z1
+    yaw = declination - math.atan2(y1, x2)
+    return math.atan2(math.sin(yaw), math.cos(yaw))
+
+
+def simulate_aiding(
+    run: "SimRun",
+    gnss_config: GnssConfig | None = GnssConfig(),
+    baro_config: BaroConfig | None = BaroConfig(),
+    mag_config: MagConfig | None = None,
+) -> Aiding:
+    """GNSS, baro and magnetometer rows for a run (None config = that sensor is absent)."""
+    return Aiding(
+        gnss=None if gnss_config is None else gnss(run, gnss_config),
+        baro=None if baro_config is None else baro(run, baro_config),
+        mag=None if mag_config is None else magnetometer(run, mag_config),
+    )
+
+
+def _write_csv(path: Path, columns: Sequence[str], rows: np.ndarray) -> None:
+    """CSV with a header and round-trip floats (``nan`` where there is no value)."""
+    with open(path, "w", encoding="utf-8", newline="") as fh:
+        fh.write(",".join(columns) + "\n")
+        for row in np.asarray(rows, dtype=np.float64).tolist():
+            fh.write(",".join(map(repr, row)) + "\n")
+
+
+def write_aiding(
+    outdir: Path, *, gnss: np.ndarray | None = None, baro: np.ndarray | None = None, mag: np.ndarray | None = None
+) -> list[Path]:
+    """Write gnss.csv, baro.csv and mag.csv (those given) into outdir; returns the paths."""
+    outdir = Path(outdir)
+    outdir.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for name, columns, rows in (("gnss", GNSS_COLUMNS, gnss), ("baro", BARO_COLUMNS, baro), ("mag", MAG_COLUMNS, mag)):
+        if rows is not None:
+            path = outdir / f"{name}.csv"
+            _write_csv(path, columns, rows)
+            paths.append(path)
+    return paths
