@@ -279,6 +279,30 @@ def sanity_note(ours: np.ndarray, theirs: np.ndarray, t_check: float = SANITY_T)
 
 
 # --- driver ------------------------------------------------------------------------
+C_LIMIT_SOURCE = ROOT.parent / "shared" / "bench" / "limit_ins.c"
+
+
+def time_c_limit(n: int, repeat: int) -> tuple[float | None, str]:
+    """Seconds of the scalar C 2-sample WGS-84 update (``limit_ins.c``, gcc -O2, one core, in
+    memory) on n samples, best of ``repeat``; None with the reason when it is not beside the repo."""
+    import shutil
+
+    if not C_LIMIT_SOURCE.is_file():
+        return None, f"C limit absent ({C_LIMIT_SOURCE.name} is not beside the repository)"
+    cc = shutil.which("gcc") or shutil.which("cc")
+    if cc is None:
+        return None, "C limit absent (no C compiler)"
+    with tempfile.TemporaryDirectory(prefix="bench_nav_c_") as tmp:
+        exe = Path(tmp) / "limit_ins"
+        subprocess.run([cc, "-O2", "-o", str(exe), str(C_LIMIT_SOURCE), "-lm"], check=True, capture_output=True)
+        best = None
+        for _ in range(repeat):
+            out = subprocess.run([str(exe), str(n)], check=True, capture_output=True, text=True).stdout
+            sec = float(out.split()[2])
+            best = sec if best is None else min(best, sec)
+    return best, f"gcc -O2 {C_LIMIT_SOURCE.name}"
+
+
 def _row(case: str, samples: int | None, seconds: float | None, *, rate: bool = True, note: str = "") -> dict:
     return {
         "case": case,
@@ -311,11 +335,17 @@ def main(argv: Sequence[str] = ()) -> list[dict]:
     rows: list[dict] = []
     compare: list[dict] = []  # rows that get a ratio against pyins' timed part
 
+    log("C limit")
+    c_sec, c_note = time_c_limit(n, max(rep, 3))
+    rows.append(_row("C limit (scalar 2-sample WGS-84)", n, c_sec, note=c_note))
     log("mavins kernel")
     r = _row(f"mavins compute (kernel, samples={ns})", n, time_kernel(t, dtheta, dv, ns, rep),
              note=f"{n // ns:,} updates")
     rows.append(r)
     compare.append(r)
+    if c_sec is not None:
+        NOTES.append(f"mavins kernel (samples={ns}) at {c_sec / r['seconds']:.2f} of the C limit's speed "
+                     f"({n / c_sec / 1e6:.2f} M samples/s), same run")
     if ns != 1:
         r = _row("mavins compute (kernel, samples=1)", n, time_kernel(t, dtheta, dv, 1, rep),
                  note=f"{n:,} updates, no coning")

@@ -37,7 +37,7 @@ class FilterSettings:
     aiding: tuple[str, ...] = ("gnss", "baro", "mag")
     gate: float = 5.0
     lever_arm: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    declination: float = 0.0  # deg, east positive
+    declination: float = 0.0  # deg, east positive (the engine sets its --declination here)
     sigma_pos: float = 10.0  # m: initial position 1-sigma without a fix
     sigma_vel: float = 0.1  # m/s: initial velocity 1-sigma (aligned at rest)
     sigma_level: float = 1.0  # deg

@@ -8,6 +8,7 @@ live, in replay and in the demo, so identical input gives bit-identical output.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections import Counter
 from dataclasses import dataclass, field
@@ -98,7 +99,8 @@ class Engine:
             raise ValueError(f"heading must be degrees or one of {', '.join(HEADING_WORDS)}, got {h!r}")
         if self.cfg.gyro_bias not in ("estimate", "none"):
             raise ValueError(f"gyro_bias must be estimate or none, got {self.cfg.gyro_bias!r}")
-        self.filter = LiveFilter(self.cfg.filter)
+        # one declination for the alignment and the filter's magnetometer updates
+        self.filter = LiveFilter(dataclasses.replace(self.cfg.filter, declination=self.cfg.declination))
         self._kcfg = sd.make_config(
             samples=self.cfg.samples, attitude=self.cfg.attitude, order=self.cfg.order,
             earth_model=self.cfg.earth_model, vertical=self.cfg.vertical, imu_rates=self.cfg.imu_rates,
