@@ -21,6 +21,19 @@ subprocess, fed over UDP on 127.0.0.1:
 * **CPU.** HIGHRES_IMU at 1 kHz, output at 50 Hz, ``--rerun FILE.rrd``:
   utime + stime of the service process (``/proc/PID/stat``, all threads) over
   a steady window after the alignment, in % of one core.
+* **Flood.** 250 Hz, then 200 kHz on a wall-clock schedule for 6 s, then
+  250 Hz (sensor time = the schedule): input over what was processed, ATTITUDE
+  per second (of wall time before, of sensor time during), navigated sensor
+  time over wall time, RSS growth, drops counted, HEARTBEAT interval.
+* **Peers.** How soon a silent peer stops receiving (``--peer-timeout 2``);
+  RSS growth of the peer table under 3000 source ports.
+* **Recorder.** RSS growth of a live Rerun recorder over 200,000 samples;
+  ``--rerun-serve`` without a viewer: logging, ``close()`` and a whole
+  ``mavins run --duration 1``.
+
+The flood, peer and recorder rows hold the figures the tests once asserted on
+timing or memory; the tests now check the behaviour behind them by events and
+counts, never by the clock.
 
 Baselines, measured in the same run: the pymavlink parse ceiling (one
 ``parse_buffer`` call per frame, in process) for ingest; a bare Python UDP echo
@@ -123,9 +136,10 @@ def _x25_rows(data: np.ndarray, extra: int) -> np.ndarray:
 
 def highres_frames(
     n: int, rate: float, gyro: Sequence[float], accel: Sequence[float], t0_usec: int = T0_USEC,
-    sysid: int = SYSID, compid: int = COMPID, chunk: int = 500_000,
+    sysid: int = SYSID, compid: int = COMPID, chunk: int = 500_000, times: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``n`` MAVLink 2 HIGHRES_IMU frames (uint8 rows, one frame each) and their ``time_usec``.
+    """``n`` MAVLink 2 HIGHRES_IMU frames (uint8 rows, one frame each) and their ``time_usec``
+    (``rate`` apart from ``t0_usec``, or the given ``times``).
 
     One frame is encoded by pymavlink as a template; ``time_usec``, ``seq`` and
     the CRC are then written for every row with numpy. The first rows are
@@ -133,7 +147,8 @@ def highres_frames(
     """
     from mavins.link.mavlink import mavlink
 
-    usec = np.round(t0_usec + np.arange(n) * (1e6 / rate)).astype(np.uint64)
+    usec = (np.round(t0_usec + np.arange(n) * (1e6 / rate)) if times is None else np.asarray(times)).astype(np.uint64)
+    n = len(usec)
     mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
 
     def encode(i: int) -> bytes:
@@ -237,7 +252,7 @@ class ServiceProc:
     command: list[str] | None = None  # instead of the console script (e.g. an instrumented interpreter)
     _ready: threading.Event = field(default_factory=threading.Event)
 
-    def start(self, timeout: float = 120.0) -> None:
+    def start(self, timeout: float = 600.0) -> None:
         cmd = (self.command or mavins_cmd()) + ["run", "--master", f"udpin:127.0.0.1:{self.port}", "--lat", str(LAT), "--lon",
                               str(LON), "--alt", str(ALT), "--heading", str(HEADING), "--align", str(ALIGN_S),
                               "--duration", f"{self.max_duration:.0f}"] + self.args
@@ -971,6 +986,394 @@ def gc_pauses(seconds: float, extra: list[str], freeze: bool, rate: float = 1000
     return {}
 
 
+# --- flood -------------------------------------------------------------------------------
+#: The flood of tests/test_hardening.py's former timed checks: 250 Hz, then FLOOD_HZ, then 250 Hz again,
+#: sensor time advancing with the sender's schedule (real time) whatever the rate.
+FLOOD_HZ, FLOOD_S, FLOOD_PRE_S, FLOOD_POST_S = 200_000.0, 6.0, 3.0, 3.0
+FLOOD_OUT_RATE = 50.0
+
+
+def flood_schedule(pre_s: float, flood_hz: float, flood_s: float, post_s: float) -> np.ndarray:
+    """Send times (s from the start) = sensor times of the flood run's samples."""
+    return np.concatenate([np.arange(0, pre_s, 1 / 250), pre_s + np.arange(0, flood_s, 1 / flood_hz),
+                           pre_s + flood_s + np.arange(0, post_s, 1 / 250)])
+
+
+def flood_sender_main(argv: Sequence[str]) -> int:
+    """``--flood-sender PORT PRE_S FLOOD_HZ FLOOD_S POST_S GX GY GZ AX AY AZ``: send the flood on schedule."""
+    port = int(argv[0])
+    pre_s, flood_hz, flood_s, post_s = (float(x) for x in argv[1:5])
+    gyro = [float(x) for x in argv[5:8]]
+    accel = [float(x) for x in argv[8:11]]
+    sched = flood_schedule(pre_s, flood_hz, flood_s, post_s)
+    frames, _ = highres_frames(len(sched), 1.0, gyro, accel, times=T0_USEC + np.round(sched * 1e6))
+    flen = frames.shape[1]
+    mv = memoryview(frames.tobytes())
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 65536)  # replies are not read
+    sock.connect(("127.0.0.1", port))
+    send = sock.send
+    print("ready", flush=True)
+    sys.stdin.readline()
+    wall0, m0 = time.time(), time.monotonic()
+    n, i, errors = len(sched), 0, 0
+    while i < n:
+        due = int(np.searchsorted(sched, time.monotonic() - m0, side="right"))
+        while i < due:
+            try:
+                send(mv[i * flen:(i + 1) * flen])
+            except OSError:
+                errors += 1
+            i += 1
+        if i < n:
+            wait = sched[i] - (time.monotonic() - m0)
+            if wait > 0.0005:
+                time.sleep(min(wait, 0.002))
+    elapsed = time.monotonic() - m0
+    flood_sent = int(np.sum((sched >= pre_s) & (sched < pre_s + flood_s)))
+    print(json.dumps({"sent": n - errors, "flood_sent": flood_sent, "wall0": wall0, "seconds": elapsed}), flush=True)
+    return 0
+
+
+class StampedClient:
+    """Receives a service's ``--out`` with kernel stamps: ATTITUDE (arrival, time_boot_ms), HEARTBEAT arrivals,
+    SYS_STATUS (arrival, message)."""
+
+    def __init__(self) -> None:
+        from mavins.link.mavlink import mavlink
+
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
+        self.sock.setsockopt(socket.SOL_SOCKET, getattr(socket, "SO_TIMESTAMP", 29), 1)
+        self.sock.bind(("127.0.0.1", 0))
+        self.port = self.sock.getsockname()[1]
+        self.attitude: list[tuple[float, int]] = []
+        self.heartbeat: list[float] = []
+        self.sys_status: list[tuple[float, object]] = []
+        self._parser = mavlink.MAVLink(None)
+        self._parser.robust_parsing = True
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        so_ts = getattr(socket, "SO_TIMESTAMP", 29)
+        while not self._stop.is_set():
+            if not select.select([self.sock], [], [], 0.05)[0]:
+                continue
+            data, anc, _, _ = self.sock.recvmsg(65535, 64)
+            arrival = time.time()
+            for level, kind, value in anc:
+                if level == socket.SOL_SOCKET and kind == so_ts and len(value) >= 16:
+                    sec, usec = struct.unpack("qq", value[:16])
+                    arrival = sec + usec * 1e-6
+            for m in self._parser.parse_buffer(data) or []:
+                name = m.get_type()
+                if name == "ATTITUDE":
+                    self.attitude.append((arrival, m.time_boot_ms))
+                elif name == "HEARTBEAT":
+                    self.heartbeat.append(arrival)
+                elif name == "SYS_STATUS":
+                    self.sys_status.append((arrival, m))
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(2.0)
+        self.sock.close()
+
+
+def flood_run(flood_hz: float = FLOOD_HZ, flood_s: float = FLOOD_S, pre_s: float = FLOOD_PRE_S,
+              post_s: float = FLOOD_POST_S) -> dict:
+    """``mavins run`` through a flood: what it processed, its output rate, memory and HEARTBEAT meanwhile."""
+    gyro, accel = static_imu()
+    port = free_udp_port()
+    client = StampedClient()
+    sender = subprocess.Popen(
+        [sys.executable, str(Path(__file__).resolve()), "--flood-sender", str(port), repr(pre_s), repr(flood_hz),
+         repr(flood_s), repr(post_s), *map(repr, gyro), *map(repr, accel)],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=ROOT)
+    total = pre_s + flood_s + post_s
+    svc = ServiceProc(port, ["--rate", str(FLOOD_OUT_RATE), "--out", f"udpout:127.0.0.1:{client.port}"],
+                      max_duration=total + 120)
+    rss: list[tuple[float, float]] = []
+    stop_mon = threading.Event()
+    try:
+        assert sender.stdout is not None and sender.stdin is not None
+        if sender.stdout.readline().strip() != "ready":
+            raise RuntimeError("flood sender did not start")
+        svc.start()
+
+        def monitor() -> None:
+            while not stop_mon.is_set():
+                v = proc_rss_mb(svc.pid)
+                if v is not None:
+                    rss.append((time.time(), v))
+                time.sleep(0.2)
+
+        mon = threading.Thread(target=monitor, daemon=True)
+        mon.start()
+        sender.stdin.write("go\n")
+        sender.stdin.flush()
+        sender.wait(total * 10 + 120)
+        stats = json.loads(sender.stdout.readline())
+        svc.drain(30.0)
+        time.sleep(1.0)
+        stop_mon.set()
+        mon.join(2.0)
+        st = udp_socket_stats(port)
+        c = svc.stop()
+    finally:
+        stop_mon.set()
+        if sender.poll() is None:
+            sender.kill()
+        sender.wait()
+        svc.stop()
+        client.close()
+    w0 = stats["wall0"]
+    wall = {"pre": w0, "flood": w0 + pre_s, "post": w0 + pre_s + flood_s, "end": w0 + total}
+    return {"stats": stats, "counters": c, "wall": wall, "rss": rss, "client": client,
+            "kernel_drops_proc": st[1] if st else None, "pre_s": pre_s, "flood_s": flood_s, "post_s": post_s,
+            "flood_hz": flood_hz}
+
+
+def flood_rows(fr: dict) -> list[dict]:
+    """Table rows of a flood run (the figures tests/test_hardening.py once asserted on timing)."""
+    c, st, wall, cl = fr["counters"], fr["stats"], fr["wall"], fr["client"]
+    sent, processed = int(st["sent"]), int(c.get("messages_received", 0))
+    dropped = int(c.get("flood_dropped", 0))
+    label = f"flood {fr['flood_hz'] / 1000:g} kHz x {fr['flood_s']:g} s"
+    rows = []
+    ratio = sent / processed if processed else float("inf")
+    rows.append(_row(f"{label}: datagrams sent / processed", samples=sent, seconds=st["seconds"],
+                     rate=st["flood_sent"] / fr["flood_s"], value=f"{ratio:.1f}x",
+                     goal=f">= 3x (a real overload): {_verdict(ratio >= 3.0)}",
+                     note=f"processed {processed:,}; per s = flood datagrams / flood seconds scheduled"))
+    # output rate: per wall second before the flood (the sender keeps its schedule), per second of sensor
+    # time during it (a Python sender cannot send 200,000 a second on time)
+    arr = np.array([a for a, _ in cl.attitude]) if cl.attitude else np.zeros(0)
+    edges = np.arange(wall["pre"] + 1.5, wall["flood"] - 0.999, 1.0)
+    before = [int(np.sum((arr >= e) & (arr < e + 1.0))) for e in edges]
+    during = [(a, ms) for a, ms in cl.attitude if wall["flood"] + 1.0 <= a <= wall["post"]]
+    ms = np.array([m for _, m in during], dtype=np.int64)
+    sec = ms // 1000
+    whole = np.unique(sec)[1:-1]
+    per_sensor_s = [int(np.sum(sec == k)) for k in whole]
+    lo, hi = 0.8 * FLOOD_OUT_RATE, 1.2 * FLOOD_OUT_RATE
+
+    def span(v: list[int]) -> str:
+        return f"{min(v)}-{max(v)}" if v else "none"
+
+    rows.append(_row(f"{label}: ATTITUDE per s of wall time before", value=span(before),
+                     goal=f"{lo:.0f}-{hi:.0f}: {_verdict(bool(before) and all(lo <= n <= hi for n in before))}",
+                     note=f"--rate {FLOOD_OUT_RATE:g}, 250 Hz input"))
+    rows.append(_row(f"{label}: ATTITUDE per s of sensor time during", value=span(per_sensor_s),
+                     goal=f"{lo:.0f}-{hi:.0f}: "
+                          f"{_verdict(bool(per_sensor_s) and all(lo <= n <= hi for n in per_sensor_s))}",
+                     note="seconds of sensor time wholly inside the flood"))
+    if during:
+        wall_span = during[-1][0] - during[0][0]
+        sensor_span = (ms[-1] - ms[0]) / 1000.0
+        adv = sensor_span / wall_span if wall_span > 0 else float("nan")
+        rows.append(_row(f"{label}: navigated sensor time / wall time during", value=f"{adv:.2f}",
+                         goal=f"> 0.3 (no stall, no backlog): {_verdict(adv > 0.3)}",
+                         note=f"{sensor_span:.2f} s of sensor time in {wall_span:.2f} s"))
+    post = [m for a, m in cl.attitude if m * 1000 >= T0_USEC + (fr["pre_s"] + fr["flood_s"] + 0.5) * 1e6]
+    n_post = len(post) / max(fr["post_s"] - 0.5, 1e-9)
+    rows.append(_row(f"{label}: output sets per s of sensor time after", value=f"{n_post:.0f}",
+                     goal=f">= {lo:.0f}: {_verdict(n_post >= lo)}", note="from 0.5 s after the flood"))
+    rss = np.array(fr["rss"], dtype=float).reshape(-1, 2)
+    base = rss[(rss[:, 0] > wall["pre"] + 1.0) & (rss[:, 0] < wall["flood"]), 1]
+    rest = rss[rss[:, 0] >= wall["flood"], 1]
+    if len(base) and len(rest):
+        grown = float(rest.max() - base.max())
+        rows.append(_row(f"{label}: RSS growth", value=f"{grown:+.1f} MB", goal=f"< 20 MB: {_verdict(grown < 20)}",
+                         note=f"before {base.max():.1f} MB, max during and after {rest.max():.1f} MB"))
+    lost = sent - processed
+    rows.append(_row(f"{label}: counted as dropped", value=f"{dropped:,} of {lost:,}",
+                     goal=f"all: {_verdict(dropped == lost)}",
+                     note=f"skipped {c.get('flood_skipped', 0):,}, kernel {c.get('kernel_dropped', 0):,} "
+                          f"(/proc/net/udp {fr['kernel_drops_proc']})"))
+    hb = np.array(cl.heartbeat)
+    for name, a, b in (("before", wall["pre"] + 1.0, wall["flood"]), ("during", wall["flood"], wall["post"])):
+        gaps = np.diff(hb[(hb >= a) & (hb < b)])
+        if len(gaps):
+            med = float(np.median(gaps))
+            rows.append(_row(f"HEARTBEAT interval (wall), {name} the flood", value=f"{med:.2f} s",
+                             goal=f"1 Hz, 0.8-1.3 s: {_verdict(0.8 < med < 1.3)}",
+                             note=f"median of {len(gaps)}, max {float(gaps.max()):.2f} s"))
+    return rows
+
+
+# --- peers -------------------------------------------------------------------------------
+def _hb_frame() -> bytes:
+    from mavins.link.mavlink import mavlink
+
+    plain = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
+    return bytes(plain.heartbeat_encode(6, 8, 0, 0, 4).pack(plain))
+
+
+def _stamped(sock: socket.socket) -> list[float]:
+    """Kernel receive stamps of every datagram waiting in ``sock`` (SO_TIMESTAMP on)."""
+    out = []
+    so_ts = getattr(socket, "SO_TIMESTAMP", 29)
+    while True:
+        try:
+            _, anc, _, _ = sock.recvmsg(65535, 64, socket.MSG_DONTWAIT)
+        except (BlockingIOError, InterruptedError):
+            return out
+        stamp = time.time()
+        for level, kind, value in anc:
+            if level == socket.SOL_SOCKET and kind == so_ts and len(value) >= 16:
+                sec, usec = struct.unpack("qq", value[:16])
+                stamp = sec + usec * 1e-6
+        out.append(stamp)
+
+
+def _peer_socket() -> socket.socket:
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.setsockopt(socket.SOL_SOCKET, getattr(socket, "SO_TIMESTAMP", 29), 1)
+    s.bind(("127.0.0.1", 0))
+    return s
+
+
+def peer_expiry(timeout: float = 2.0, watch: float = 5.5) -> dict:
+    """How long after its only frame a silent peer still receives (``--peer-timeout``); a talker for contrast."""
+    hb = _hb_frame()
+    port = free_udp_port()
+    svc = ServiceProc(port, ["--sysid", "1", "--peer-timeout", repr(timeout)], max_duration=watch + 120)
+    silent, talker = _peer_socket(), _peer_socket()
+    svc.start()
+    try:
+        t0 = time.time()
+        silent.sendto(hb, ("127.0.0.1", port))
+        got_s: list[float] = []
+        got_t: list[float] = []
+        next_talk = time.monotonic()
+        end = next_talk + watch
+        while time.monotonic() < end:
+            if time.monotonic() >= next_talk:
+                talker.sendto(hb, ("127.0.0.1", port))
+                next_talk += 0.5
+            got_s += _stamped(silent)
+            got_t += _stamped(talker)
+            time.sleep(0.02)
+    finally:
+        svc.stop()
+        silent.close()
+        talker.close()
+    return {"timeout": timeout, "watch": watch, "silent_last": (max(got_s) - t0) if got_s else None,
+            "silent_n": len(got_s), "talker_last": (max(got_t) - t0) if got_t else None}
+
+
+def peer_table_rss(n_ports: int = 3000) -> dict:
+    """RSS of ``mavins run --max-peers 4`` before and after frames from ``n_ports`` source ports."""
+    hb = _hb_frame()
+    port = free_udp_port()
+    svc = ServiceProc(port, ["--sysid", "1", "--max-peers", "4", "--peer-timeout", "600"], max_duration=600)
+    svc.start()
+    try:
+        time.sleep(0.5)
+        rss0 = proc_rss_mb(svc.pid)
+        for i in range(n_ports):
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+                s.bind(("127.0.0.1", 0))
+                s.sendto(hb, ("127.0.0.1", port))
+            if i % 200 == 199:
+                time.sleep(0.01)
+        svc.drain()
+        time.sleep(2.0)
+        rss1 = proc_rss_mb(svc.pid)
+    finally:
+        c = svc.stop()
+    return {"n": n_ports, "rss0": rss0, "rss1": rss1, "received": c.get("messages_received", 0)}
+
+
+# --- the recorder --------------------------------------------------------------------------
+#: ``python -c`` script: a live Recorder fed ``n`` samples (250 Hz) and n/5 output sets; prints JSON with the
+#: process's RSS after a warm-up fifth and at four points after it, and the file size at each.
+_RECORDER_MEMORY = r"""
+import gc, json, math, sys, time
+from pathlib import Path
+import numpy as np
+from mavins.record.recorder import Recorder
+
+def rss_mb():
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024.0
+
+path, n = Path(sys.argv[1]), int(sys.argv[2])
+rec = Recorder(path, serve=False, app="mavins-membench", live=True)
+row = np.zeros(14); row[10] = 1.0
+lat0, lon0 = math.radians(47.0), math.radians(8.0)
+ned = np.zeros(3)
+
+def feed(a, b):
+    for i in range(a, b):
+        t = 1.0 + i * 0.004
+        rec.on_sample(t, (0.01, -0.02, 0.03 * math.sin(t)), (0.1, 0.2, -9.8))
+        if i % 5 == 0:
+            row[0] = t; row[1] = lat0 + 1e-7 * i; row[2] = lon0; row[3] = 400.0; row[9] = 0.1 * math.sin(t)
+            ned[0] = 0.6 * i; ned[1] = 10.0 * math.sin(t / 10.0)
+            rec.on_output(row, (47.0, 8.0, 400.0), ned)
+        if i % 2500 == 0:
+            rec.on_counters(t, {"time_backwards": i // 2500})
+            rec.on_event(t, "INFO", f"event {i}")
+
+warm = n // 5
+t0 = time.perf_counter()
+feed(0, warm); gc.collect(); time.sleep(0.2)
+base, size0 = rss_mb(), path.stat().st_size
+step = (n - warm) // 4
+rss = []
+for k in range(4):
+    feed(warm + k * step, warm + (k + 1) * step)
+    rss.append(rss_mb())
+t_feed = time.perf_counter() - t0
+rec.close()
+print(json.dumps({"base": base, "rss": rss, "size0": size0, "size": path.stat().st_size, "feed_s": t_feed}))
+"""
+
+
+def recorder_memory(workdir: Path, n: int = 200_000) -> dict:
+    rrd = workdir / "recorder_memory.rrd"
+    proc = subprocess.run([sys.executable, "-c", _RECORDER_MEMORY, str(rrd), str(n)], capture_output=True, text=True,
+                          timeout=1800, cwd=ROOT)
+    if proc.returncode != 0:
+        raise RuntimeError(proc.stderr.strip().splitlines()[-1] if proc.stderr.strip() else "recorder script failed")
+    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    out["n"] = n
+    return out
+
+
+def recorder_serve(n: int = 20_000) -> dict:
+    """A Recorder with the gRPC server and no viewer: seconds to log ``n`` samples (+ n/5 sets) and to close."""
+    from mavins.record.recorder import Recorder
+
+    with tempfile.TemporaryDirectory(prefix="bench_serve_") as tmp:
+        t0 = time.perf_counter()
+        rec = Recorder(Path(tmp) / "served.rrd", serve=True, app="mavins-servebench")
+        row = np.zeros(14)
+        row[10] = 1.0
+        for i in range(n):
+            t = i * 0.004
+            rec.on_sample(t, (0.0, 0.0, 0.0), (0.0, 0.0, -9.8))
+            if i % 5 == 0:
+                row[0] = t
+                rec.on_output(row, (47.0, 8.0, 400.0), np.zeros(3))
+        t1 = time.perf_counter()
+        rec.close()
+        t2 = time.perf_counter()
+    cli0 = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix="bench_serve_cli_") as tmp:
+        proc = subprocess.run(mavins_cmd() + ["run", "--master", f"udpin:127.0.0.1:{free_udp_port()}", "--rerun",
+                                              str(Path(tmp) / "live.rrd"), "--rerun-serve", "--duration", "1"],
+                              capture_output=True, text=True, timeout=600, cwd=ROOT)
+    cli = time.perf_counter() - cli0
+    return {"n": n, "log_s": t1 - t0, "close_s": t2 - t1, "cli_s": cli, "cli_rc": proc.returncode}
+
+
 # --- driver ----------------------------------------------------------------------------
 def _row(case: str, *, samples: int | None = None, seconds: float | None = None, rate: float | None = None,
          value: str | None = None, ratio: float | None = None, baseline: str | None = None,
@@ -993,7 +1396,9 @@ def main(argv: Sequence[str] = ()) -> list[dict]:
     p.add_argument("--cpu-seconds", type=float, default=20.0, help="CPU window (s)")
     p.add_argument("--cap", type=float, default=160_000.0, help="highest rate the search tries")
     p.add_argument("--tol", type=float, default=0.05, help="relative resolution of the rate search")
-    p.add_argument("--skip", action="append", default=[], choices=("ingest", "search", "latency", "cpu"),
+    p.add_argument("--flood-seconds", type=float, default=FLOOD_S, help=f"length of the {FLOOD_HZ:,.0f}/s flood")
+    p.add_argument("--skip", action="append", default=[],
+                   choices=("ingest", "search", "latency", "cpu", "flood", "peers", "recorder"),
                    help="leave a part out (repeatable)")
     p.add_argument("--profile", action="store_true", help="also record the service with py-spy and print the top functions")
     p.add_argument("--profile-rate", type=float, default=None, help="input rate of the profile (default: the found maximum)")
@@ -1001,6 +1406,7 @@ def main(argv: Sequence[str] = ()) -> list[dict]:
     if args.quick:
         args.goal_seconds, args.search_seconds = 5.0, 3.0
         args.latency_seconds, args.cpu_seconds, args.tol = 5.0, 5.0, 0.25
+        args.flood_seconds = 3.0
     NOTES.clear()
     rows: list[dict] = []
     with tempfile.TemporaryDirectory(prefix="bench_service_") as tmp:
@@ -1106,6 +1512,49 @@ def main(argv: Sequence[str] = ()) -> list[dict]:
                              note=f"kernel {bare_sys:.1f} %; select + recvmsg + parse_buffer, nothing else"))
             NOTES.append(f"CPU: the sender process used {with_rr['sender_cpu_pct']:.1f} % of a core at 1 kHz")
 
+        if "flood" not in args.skip:
+            log(f"flood: 250 Hz, {FLOOD_HZ:,.0f}/s for {args.flood_seconds:g} s, 250 Hz")
+            rows += flood_rows(flood_run(flood_s=args.flood_seconds))
+
+        if "peers" not in args.skip:
+            log("peers: expiry of a silent peer (--peer-timeout 2)")
+            pe = peer_expiry(2.0)
+            last = pe["silent_last"]
+            rows.append(_row("peer expiry: last datagram to a silent peer after its frame",
+                             value="none" if last is None else f"{last:.2f} s",
+                             goal=f"<= timeout + 0.5 s: {_verdict(last is not None and last <= pe['timeout'] + 0.5)}",
+                             note=f"--peer-timeout {pe['timeout']:g}; {pe['silent_n']} datagrams; a talker every "
+                                  f"0.5 s last received at {pe['talker_last'] or 0:.2f} s of {pe['watch']:g}"))
+            log("peers: memory of the peer table under 3000 source ports")
+            pt = peer_table_rss(3000)
+            if pt["rss0"] and pt["rss1"]:
+                grown = pt["rss1"] - pt["rss0"]
+                rows.append(_row(f"peer table: RSS growth after {pt['n']:,} source ports", samples=pt["n"],
+                                 value=f"{grown:+.1f} MB", goal=f"< 5 MB: {_verdict(grown < 5)}",
+                                 note=f"--max-peers 4; {pt['rss0']:.1f} -> {pt['rss1']:.1f} MB; "
+                                      f"{pt['received']:,} frames read"))
+
+        if "recorder" not in args.skip:
+            n_rec = 50_000 if args.quick else 200_000
+            log(f"recorder: memory over {n_rec:,} samples")
+            rm = recorder_memory(work, n_rec)
+            written = (rm["size"] - rm["size0"]) / 2**20
+            grown = max(rm["rss"]) - rm["base"]
+            rows.append(_row(f"recorder: RSS growth over {n_rec:,} samples + {n_rec // 5:,} sets", samples=n_rec,
+                             seconds=rm["feed_s"], rate=n_rec / rm["feed_s"], value=f"{grown:+.1f} MB",
+                             goal=f"< 0.6 x written + 4 MB: {_verdict(grown < 0.6 * written + 4)}",
+                             note=f"{written:.1f} MB written meanwhile; RSS {rm['base']:.0f} MB after a warm-up fifth"))
+            log("recorder: --rerun-serve without a viewer")
+            rs = recorder_serve()
+            rows.append(_row(f"recorder --rerun-serve, no viewer: log {rs['n']:,} samples", samples=rs["n"],
+                             seconds=rs["log_s"], rate=rs["n"] / rs["log_s"], goal=None,
+                             note="+ a set every 5 samples"))
+            rows.append(_row("recorder --rerun-serve, no viewer: close()", seconds=rs["close_s"],
+                             goal=f"< 5 s: {_verdict(rs['close_s'] < 5)}"))
+            rows.append(_row("mavins run --rerun-serve --duration 1, no viewer: process", seconds=rs["cli_s"],
+                             goal=f"< 30 s: {_verdict(rs['cli_s'] < 30 and rs['cli_rc'] == 0)}",
+                             note=f"exit code {rs['cli_rc']}; includes loading the kernels"))
+
         if args.profile:
             rate = args.profile_rate or 15_000.0
             log(f"py-spy profile at {rate:,.0f}/s")
@@ -1131,6 +1580,8 @@ def main(argv: Sequence[str] = ()) -> list[dict]:
 if __name__ == "__main__":
     if len(sys.argv) > 1 and sys.argv[1] == "--sender":
         sys.exit(sender_main(sys.argv[2:]))
+    if len(sys.argv) > 1 and sys.argv[1] == "--flood-sender":
+        sys.exit(flood_sender_main(sys.argv[2:]))
     from run_all import print_report
 
     print_report(main(sys.argv[1:]), NOTES)

@@ -7,6 +7,7 @@ subcommand that needs them, so ``mavins --help`` answers at once.
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 from typing import Callable, Sequence
@@ -14,17 +15,119 @@ from typing import Callable, Sequence
 EXIT_USAGE = 2
 
 
-def _positive_int(lo: int, hi: int | None = None) -> Callable[[str], int]:
-    def parse(text: str) -> int:
+class _Range:
+    """An argparse type: a finite number within a range, checked at parse time.
+
+    ``describe(metavar)`` is the range as --help shows it (every numeric option
+    carries its range there, see :func:`_show_ranges`).
+    """
+
+    def __init__(self, kind: type, lo: float | None = None, hi: float | None = None, *, lo_open: bool = False) -> None:
+        self.kind, self.lo, self.hi, self.lo_open = kind, lo, hi, lo_open
+        self.__name__ = "whole number" if kind is int else "number"  # argparse's "invalid <name> value"
+        self.metavar = "X"
+
+    def describe(self, metavar: str | None = None) -> str:
+        m = metavar or self.metavar
+        lo, hi = (f"{v:g}" if isinstance(v, float) else str(v) for v in (self.lo, self.hi))
+        if self.lo is not None and self.hi is not None:
+            return f"{lo} < {m} <= {hi}" if self.lo_open else f"{m} in {lo}..{hi}"
+        if self.lo is not None:
+            return f"{m} {'>' if self.lo_open else '>='} {lo}"
+        if self.hi is not None:
+            return f"{m} <= {hi}"
+        return f"{m} finite"
+
+    def __call__(self, text: str) -> int | float:
+        noun = "a whole number" if self.kind is int else "a number"
         try:
-            v = int(text)
+            v = self.kind(str(text).strip())
         except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-        if v < lo or (hi is not None and v > hi):
-            raise argparse.ArgumentTypeError(f"{v} is outside {lo}..{hi if hi is not None else 'inf'}")
+            raise argparse.ArgumentTypeError(f"expected {noun}, {self.describe()}; got {text!r}") from None
+        bad = self.kind is float and not math.isfinite(v)
+        bad = bad or (self.lo is not None and (v <= self.lo if self.lo_open else v < self.lo))
+        bad = bad or (self.hi is not None and v > self.hi)
+        if bad:
+            raise argparse.ArgumentTypeError(f"{text} is outside the allowed range {self.describe()}")
         return v
 
-    return parse
+
+def _positive_int(lo: int, hi: int | None = None) -> _Range:
+    return _Range(int, lo, hi)
+
+
+def _real(lo: float | None = None, hi: float | None = None, *, above: bool = False) -> _Range:
+    """A float in [lo, hi] (``above``: lo excluded); NaN and infinities are refused."""
+    return _Range(float, lo, hi, lo_open=above)
+
+
+POSITIVE = dict(lo=0.0, above=True)  # ranges used by several options
+SYSID = (1, 255)
+HEADING_WORDS = ("auto", "gyrocompass", "mag", "vehicle")  # engine.HEADING_WORDS (not imported: --help stays light)
+
+
+class _Heading:
+    """``--heading``: degrees in -360..360 or a source word (returned as given)."""
+
+    __name__ = "heading"
+    metavar = "DEG|SOURCE"
+
+    def __init__(self, words: tuple[str, ...] = HEADING_WORDS) -> None:
+        self.words = words
+
+    def describe(self, metavar: str | None = None) -> str:
+        return f"DEG in -360..360 or {', '.join(self.words)}"
+
+    def __call__(self, text: str) -> str:
+        text = str(text).strip()
+        if text in self.words:
+            return text
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {self.describe()}; got {text!r}") from None
+        if not (math.isfinite(v) and -360.0 <= v <= 360.0):
+            raise argparse.ArgumentTypeError(f"{text} is outside the allowed range {self.describe()}")
+        return text
+
+
+class _Speed:
+    """``--speed``: a positive factor of real time, or ``max`` (returned as given)."""
+
+    __name__ = "speed"
+    metavar = "X|max"
+
+    def describe(self, metavar: str | None = None) -> str:
+        return "X > 0 or max"
+
+    def __call__(self, text: str) -> str:
+        text = str(text).strip()
+        if text == "max":
+            return text
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {self.describe()}; got {text!r}") from None
+        if not (math.isfinite(v) and v > 0):
+            raise argparse.ArgumentTypeError(f"{text} is outside the allowed range {self.describe()}")
+        return text
+
+
+def _show_ranges(parser: argparse.ArgumentParser) -> None:
+    """Append each validated option's range to its --help text (unless the text already gives it)."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in action.choices.values():
+                _show_ranges(sub)
+            continue
+        kind = action.type
+        if not hasattr(kind, "describe") or action.help in (None, argparse.SUPPRESS):
+            continue
+        metavar = action.metavar if isinstance(action.metavar, str) else action.dest.upper()
+        kind.metavar = metavar  # type: ignore[union-attr]
+        plain = kind.describe(metavar).split(" in ")[-1]  # "1..6" is already said by "--samples ... 1..6"
+        if plain not in action.help:
+            action.help = f"{action.help} ({kind.describe(metavar)})"
 
 
 def _add_nav(sub: argparse._SubParsersAction) -> None:
@@ -55,6 +158,18 @@ def _add_nav(sub: argparse._SubParsersAction) -> None:
         metavar="N",
         help="samples per attitude/velocity update, 1..6; N>=2 applies N-sample coning and sculling",
     )
+    _strapdown_options(p)
+    g = p.add_argument_group("aided navigation (with --gnss and/or --baro; docs/filter.md)")
+    g.add_argument("--gnss", type=Path, metavar="GNSS.csv",
+                   help="GNSS fixes: t,lat,lon,h [,sigma_h,sigma_v,vn,ve,vd,sigma_vel] (docs/conventions.md)")
+    g.add_argument("--baro", type=Path, metavar="BARO.csv", help="barometric height: t,h [,sigma]")
+    _filter_options(g, with_aiding=False)
+    p.add_argument("--timing", action="store_true", help="print read/compute/write seconds to stderr")
+    p.set_defaults(func=_cmd_nav)
+
+
+def _strapdown_options(p: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
+    """The strapdown settings nav, run and replay share (docs/conventions.md ``mavins nav``)."""
     p.add_argument("--no-coning", action="store_true", help="keep N-sample updates but drop coning and sculling corrections")
     p.add_argument("--attitude", choices=("quaternion", "dcm"), default="quaternion", help="attitude representation")
     p.add_argument(
@@ -63,31 +178,108 @@ def _add_nav(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--earth", choices=("wgs84", "none"), default="wgs84", help="none = non-rotating laboratory frame, constant gravity"
     )
-    p.add_argument(
-        "--orthonormalize-every",
-        type=_positive_int(0),
-        default=1,
-        metavar="K",
-        help="with --attitude dcm, re-orthonormalise every K updates (0 = never)",
-    )
+    p.add_argument("--orthonormalize-every", type=_positive_int(0), default=1, metavar="K",
+                   help="with --attitude dcm, re-orthonormalise every K updates (0 = never)")
     p.add_argument(
         "--vertical", choices=("free", "hold"), default="free", help="hold = keep height and vertical velocity at start values"
     )
-    p.add_argument(
-        "--position",
-        choices=("rectangular", "trapezoidal", "simpson"),
-        default="trapezoidal",
-        help="integration rule of the position update",
-    )
-    p.add_argument(
-        "--l-every",
-        type=_positive_int(1),
-        default=1,
-        metavar="M",
-        help="attitude updates per slow (l) cycle: Earth rate, transport rate, gravity",
-    )
-    p.add_argument("--timing", action="store_true", help="print read/compute/write seconds to stderr")
-    p.set_defaults(func=_cmd_nav)
+    p.add_argument("--position", choices=("rectangular", "trapezoidal", "simpson"), default="trapezoidal",
+                   help="integration rule of the position update")
+    p.add_argument("--l-every", type=_positive_int(1), default=1, metavar="M",
+                   help="attitude updates per slow (l) cycle: Earth rate, transport rate, gravity")
+
+
+GRADES = ("consumer", "industrial", "tactical", "navigation")
+
+
+def _filter_options(g: argparse._ArgumentGroup, with_aiding: bool = True) -> None:
+    """The error-state filter's options (docs/conventions.md "Aided navigation")."""
+    if with_aiding:
+        g.add_argument("--aiding", type=_Aiding(), default="gnss,baro,mag", metavar="KINDS",
+                       help="comma list of gnss,baro,mag,zupt to use from the stream, or none (free inertial)")
+    g.add_argument("--grade", choices=GRADES, default="consumer",
+                   help="the filter's IMU error model: the simulator's grade figures")
+    g.add_argument("--imu-spec", type=Path, metavar="SPEC.toml",
+                   help="the filter's IMU error model from a TOML file (gyro_arw, gyro_bias, ... : docs/conventions.md)")
+    g.add_argument("--gate", type=_real(0.0, 1e3, above=True), default=5.0, metavar="N",
+                   help="reject a measurement whose normalised innovation exceeds N sigma")
+    g.add_argument("--lever-arm", type=_Vec3(), default=(0.0, 0.0, 0.0), metavar="X,Y,Z",
+                   help="GNSS antenna position from the IMU, body frame FRD (m)")
+
+
+def _imu_spec(args: argparse.Namespace) -> str | dict:
+    """The grade name, or the keys of --imu-spec (a one-line error on a bad file)."""
+    if getattr(args, "imu_spec", None) is None:
+        return args.grade
+    import tomllib
+
+    from .core.errmodel import SPEC_KEYS
+
+    try:
+        keys = tomllib.loads(args.imu_spec.read_text())
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise ValueError(f"--imu-spec {args.imu_spec}: {exc}") from None
+    unknown = sorted(set(keys) - set(SPEC_KEYS))
+    if unknown:
+        raise ValueError(f"--imu-spec {args.imu_spec}: unknown keys {', '.join(unknown)} (allowed: {', '.join(SPEC_KEYS)})")
+    bad = [k for k, v in keys.items() if not isinstance(v, (int, float)) or isinstance(v, bool) or not v >= 0]
+    if bad:
+        raise ValueError(f"--imu-spec {args.imu_spec}: {', '.join(bad)} must be non-negative numbers")
+    return {k: float(v) for k, v in keys.items()}
+
+
+class _Aiding:
+    """--aiding: a comma list of aiding kinds, or none."""
+
+    def describe(self, metavar: str | None = None) -> str:
+        return "gnss,baro,mag,zupt or none"
+
+    def __call__(self, text: str) -> tuple[str, ...]:
+        from .aiding import AIDING_KINDS
+
+        if text.strip() == "none":
+            return ()
+        kinds = tuple(k.strip() for k in text.split(",") if k.strip())
+        bad = [k for k in kinds if k not in AIDING_KINDS]
+        if bad or not kinds:
+            raise argparse.ArgumentTypeError(f"expected a comma list of {','.join(AIDING_KINDS)} or none, got {text!r}")
+        return kinds
+
+
+class _Outage:
+    """START,END: an interval of sensor time (s)."""
+
+    def describe(self, metavar: str | None = None) -> str:
+        return "START,END with 0 <= START < END"
+
+    def __call__(self, text: str) -> tuple[float, float]:
+        import math
+
+        try:
+            a, b = (float(x) for x in text.split(","))
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected START,END (s), got {text!r}") from None
+        if not (math.isfinite(a) and math.isfinite(b) and 0.0 <= a < b):
+            raise argparse.ArgumentTypeError(f"expected START,END with 0 <= START < END, got {text!r}")
+        return a, b
+
+
+class _Vec3:
+    """X,Y,Z: three finite numbers."""
+
+    def describe(self, metavar: str | None = None) -> str:
+        return "three numbers X,Y,Z"
+
+    def __call__(self, text: str) -> tuple[float, float, float]:
+        import math
+
+        try:
+            v = tuple(float(x) for x in text.split(","))
+        except ValueError:
+            v = ()
+        if len(v) != 3 or not all(math.isfinite(x) and abs(x) < 1e3 for x in v):
+            raise argparse.ArgumentTypeError(f"expected three numbers X,Y,Z (m, below 1000), got {text!r}")
+        return v  # type: ignore[return-value]
 
 
 def _cmd_nav(args: argparse.Namespace) -> int:
@@ -109,8 +301,18 @@ def _cmd_nav(args: argparse.Namespace) -> int:
         timing=args.timing,
     )
     try:
-        rows = run_nav(args.imu, args.init, args.output, opts)
-    except files.DataFileError as exc:
+        if args.gnss is None and args.baro is None:
+            rows = run_nav(args.imu, args.init, args.output, opts)
+        else:
+            from .nav import run_nav_aided
+
+            rows, counts = run_nav_aided(args.imu, args.init, args.output, opts, args.gnss, args.baro,
+                                         _imu_spec(args), args.lever_arm, args.gate)
+            for kind, (ok, bad) in counts.items():
+                if ok or bad:
+                    print(f"mavins nav: {kind}: {ok} accepted, {bad} rejected (gate {args.gate:g} sigma)",
+                          file=sys.stderr)
+    except (files.DataFileError, files.ResourceError, ValueError) as exc:
         print(f"mavins nav: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     print(f"mavins nav: wrote {rows} solution rows to {args.output}", file=sys.stderr)
@@ -138,9 +340,11 @@ def _add_sim(sub: argparse._SubParsersAction) -> None:
     out = p.add_mutually_exclusive_group(required=True)
     out.add_argument("-o", "--output", type=Path, metavar="DIR", help="write the files into DIR")
     out.add_argument("--stream", metavar="URL", help="stream over MAVLink to a pymavlink URL, e.g. udpout:127.0.0.1:14551")
-    p.add_argument("--duration", type=float, default=None, metavar="S", help="seconds to simulate (default: the scenario's)")
-    p.add_argument("--rate", type=float, default=None, metavar="HZ", help="IMU sample rate (default: the scenario's)")
-    p.add_argument("--seed", type=int, default=0, help="random seed of the sensor errors")
+    p.add_argument("--duration", type=_real(**POSITIVE), default=None, metavar="S",
+                   help="seconds to simulate (default: the scenario's)")
+    p.add_argument("--rate", type=_real(0.0, 1e6, above=True), default=None, metavar="HZ",
+                   help="IMU sample rate (default: the scenario's)")
+    p.add_argument("--seed", type=_positive_int(0), default=0, metavar="N", help="random seed of the sensor errors")
     p.add_argument(
         "--grade",
         choices=("ideal", "consumer", "industrial", "tactical", "navigation"),
@@ -154,85 +358,108 @@ def _add_sim(sub: argparse._SubParsersAction) -> None:
         default="averaged",
         help="HIGHRES_IMU carries interval averages (like PX4) or instantaneous samples",
     )
-    p.add_argument("--speed", default="1", metavar="X|max", help="streaming pace: 1 = real time, 10 = ten times, max = as fast as possible")
-    p.add_argument("--sysid", type=int, default=1, help="system id of the simulated autopilot")
+    p.add_argument("--speed", type=_Speed(), default="1", metavar="X|max",
+                   help="streaming pace: 1 = real time, 10 = ten times, max = as fast as possible")
+    p.add_argument("--sysid", type=_positive_int(*SYSID), default=1, metavar="ID", help="system id of the simulated autopilot")
+    p.add_argument("--gnss-rate", type=_real(0.0, 100.0), default=1.0, metavar="HZ",
+                   help="GNSS fixes per second written to gnss.csv (with baro.csv; 0 = none; docs/simulator.md)")
+    p.add_argument("--gnss-outage", type=_Outage(), metavar="START,END",
+                   help="no GNSS fix between these sensor times (s), in files and when streaming")
     p.add_argument("--imus", type=_positive_int(1, 3), default=1, metavar="N",
                    help="IMUs to stream (1..3): extras as HIGHRES_IMU id 1, 2, or with --msg raw as SCALED_IMU2/3")
     p.set_defaults(func=_cmd_sim)
 
 
 def _cmd_sim(args: argparse.Namespace) -> int:
+    from . import files
     from sim.scenarios import ScenarioError, load
 
     try:
         scenario = load(args.scenario)
-    except ScenarioError as exc:
-        print(f"mavins sim: error: {exc}", file=sys.stderr)
+    except (ScenarioError, UnicodeDecodeError, OSError) as exc:
+        print(f"mavins sim: error: {_scenario_error(args.scenario, exc)}", file=sys.stderr)
         return EXIT_USAGE
-    speed: float | None
-    if args.speed == "max":
-        speed = None
-    else:
-        try:
-            speed = float(args.speed)
-        except ValueError:
-            print(f"mavins sim: error: --speed takes a number or 'max', got {args.speed!r}", file=sys.stderr)
-            return EXIT_USAGE
-        if speed <= 0:
-            print("mavins sim: error: --speed must be positive", file=sys.stderr)
-            return EXIT_USAGE
-    from sim.generate import generate, write
+    speed = None if args.speed == "max" else float(args.speed)
+    from sim.generate import FILE_NAMES, check_size, generate, write
 
     try:
+        if args.output is not None:
+            if args.output.exists() and not args.output.is_dir():
+                raise files.DataFileError(f"{args.output}: -o names a file, expected a directory to write into")
+            files.check_outputs({f"-o {args.output}/{n}": args.output / n for n in FILE_NAMES},
+                                {"SCENARIO": Path(scenario.source)})
+        check_size(scenario, duration=args.duration, rate=args.rate, outdir=args.output)
         run = generate(scenario, duration=args.duration, rate=args.rate, seed=args.seed, grade=args.grade,
                        usec_grid=args.stream is not None)
-    except ValueError as exc:
-        print(f"mavins sim: error: {exc}", file=sys.stderr)
+        if args.output is not None:
+            from sim.aiding import GnssConfig, simulate_aiding
+
+            outages = (tuple(args.gnss_outage),) if args.gnss_outage else ()
+            aiding = simulate_aiding(run, GnssConfig(rate=args.gnss_rate, outages=outages)) \
+                if args.gnss_rate > 0 else None
+            paths = write(run, args.output, aiding)
+    except (ValueError, OSError) as exc:  # ScenarioError, DataFileError and ResourceError are ValueErrors
+        text = f"{exc.filename}: {exc.strerror}" if isinstance(exc, OSError) and exc.filename else str(exc)
+        print(f"mavins sim: error: {text}", file=sys.stderr)
         return EXIT_USAGE
     if args.output is not None:
-        paths = write(run, args.output)
         print(f"mavins sim: {scenario.name}: {len(run.t)} samples at {run.rate:g} Hz, grade {run.grade}: "
               + ", ".join(str(p) for p in paths), file=sys.stderr)
         return 0
     from sim.stream import StreamOptions, stream
 
+    outages = (tuple(args.gnss_outage),) if args.gnss_outage else ()
     stats = stream(run, args.stream, StreamOptions(msg=args.msg, imu_rates=args.imu_rates, speed=speed, sysid=args.sysid,
-                                                  imus=args.imus, seed=args.seed))
+                                                  imus=args.imus, seed=args.seed, gnss_outages=outages))
     print(f"mavins sim: streamed {stats.imu_messages} IMU messages to {args.stream}", file=sys.stderr)
     return 0
+
+
+def _scenario_error(name: str, exc: Exception) -> str:
+    """One line for a scenario that cannot be loaded."""
+    if isinstance(exc, UnicodeDecodeError):
+        return (f"{name}: expected a scenario TOML file (UTF-8 text), found bytes that are not text "
+                f"({exc.reason} at byte {exc.start})")
+    if isinstance(exc, OSError):
+        return f"{name}: cannot read: {exc.strerror or exc}"
+    return str(exc)
 
 
 def _nav_options(p: argparse.ArgumentParser) -> None:
     """Navigation options shared by run, replay (CONVENTIONS.md ``mavins run``)."""
     g = p.add_argument_group("navigation")
-    g.add_argument("--lat", type=float, metavar="DEG", help="initial latitude (else the vehicle's first good GPS fix)")
-    g.add_argument("--lon", type=float, metavar="DEG", help="initial longitude")
-    g.add_argument("--alt", type=float, metavar="M", help="initial ellipsoidal height")
-    g.add_argument("--heading", default="auto", metavar="DEG|SOURCE",
+    g.add_argument("--lat", type=_real(-90.0, 90.0), metavar="DEG", help="initial latitude (else the vehicle's first good GPS fix)")
+    g.add_argument("--lon", type=_real(-180.0, 180.0), metavar="DEG", help="initial longitude")
+    g.add_argument("--alt", type=_real(-1e4, 1e6), metavar="M", help="initial ellipsoidal height")
+    g.add_argument("--heading", type=_Heading(), default="auto", metavar="DEG|SOURCE",
                    help="initial yaw in degrees, or a source: vehicle (its ATTITUDE), mag (magnetometer), "
                         "gyrocompass (navigation-grade gyros), auto (vehicle, else mag, else gyrocompass)")
-    g.add_argument("--declination", type=float, default=0.0, metavar="DEG", help="magnetic declination for --heading mag")
+    g.add_argument("--declination", type=_real(-180.0, 180.0), default=0.0, metavar="DEG", help="magnetic declination for --heading mag")
     g.add_argument("--gyro-bias", choices=("estimate", "none"), default="estimate",
                    help="estimate = remove the mean gyro minus Earth rate of the static window (not with gyrocompass)")
-    g.add_argument("--align", type=float, default=10.0, metavar="S", help="static coarse alignment window (sensor time)")
+    g.add_argument("--align", type=_real(0.0), default=10.0, metavar="S", help="static coarse alignment window (sensor time)")
     g.add_argument("--imu-rates", choices=("averaged", "sampled"), default="averaged",
                    help="IMU rates are interval averages (PX4 HIGHRES_IMU) or instantaneous samples")
     g.add_argument("--samples", type=_positive_int(1, 6), default=2, metavar="N", help="samples per attitude update (1..6)")
-    g.add_argument("--rate", type=float, default=50.0, metavar="HZ", help="output rate in sensor time")
+    g.add_argument("--rate", type=_real(0.0, 1e4, above=True), default=50.0, metavar="HZ", help="output rate in sensor time")
     g.add_argument("--imu", default="auto", choices=("auto", "highres", "raw", "scaled", "scaled2", "scaled3"),
                    help="IMU message to navigate on (auto = the first one seen)")
-    g.add_argument("--imu-id", type=int, default=None, metavar="ID", help="id field of HIGHRES_IMU/RAW_IMU to use")
-    g.add_argument("--raw-acc-scale", type=float, default=9.80665e-3, metavar="M_S2",
+    g.add_argument("--imu-id", type=_positive_int(0, 255), default=None, metavar="ID", help="id field of HIGHRES_IMU/RAW_IMU to use")
+    g.add_argument("--raw-acc-scale", type=_real(**POSITIVE), default=9.80665e-3, metavar="M_S2",
                    help="RAW_IMU accelerometer scale, m/s^2 per count (ArduPilot: 1 mG)")
-    g.add_argument("--raw-gyro-scale", type=float, default=1e-3, metavar="RAD_S",
+    g.add_argument("--raw-gyro-scale", type=_real(**POSITIVE), default=1e-3, metavar="RAD_S",
                    help="RAW_IMU gyro scale, rad/s per count (ArduPilot: 1 mrad/s)")
-    g.add_argument("--target-system", type=int, default=None, metavar="SYSID", help="accept IMU data only from this system")
-    g.add_argument("--max-accel", type=float, default=16 * 9.80665, metavar="M_S2", help="accelerometer range")
-    g.add_argument("--max-gyro", type=float, default=2000.0, metavar="DEG_S", help="gyro range")
-    g.add_argument("--max-gap", type=float, default=1.0, metavar="S",
+    g.add_argument("--target-system", type=_positive_int(*SYSID), default=None, metavar="SYSID", help="accept IMU data only from this system")
+    g.add_argument("--max-accel", type=_real(**POSITIVE), default=16 * 9.80665, metavar="M_S2", help="accelerometer range")
+    g.add_argument("--max-gyro", type=_real(**POSITIVE), default=2000.0, metavar="DEG_S", help="gyro range")
+    g.add_argument("--max-gap", type=_real(**POSITIVE), default=1.0, metavar="S",
                    help="a longer gap in sensor time is not integrated and marks the solution degraded")
     g.add_argument("--config", type=Path, metavar="FILE.toml", help="TOML file with any of these options (command line wins)")
+    _strapdown_options(p.add_argument_group("strapdown (as mavins nav)"))
+    _filter_options(p.add_argument_group("aided navigation (docs/filter.md)"))
 
+
+_ODOMETRY_FRAMES = {"frd": 20, "ned": 1}  # MAV_FRAME_LOCAL_FRD, MAV_FRAME_LOCAL_NED
 
 _IMU_NAMES = {"auto": "auto", "highres": "HIGHRES_IMU", "raw": "RAW_IMU", "scaled": "SCALED_IMU",
               "scaled2": "SCALED_IMU2", "scaled3": "SCALED_IMU3"}
@@ -245,14 +472,37 @@ def _apply_config(args: argparse.Namespace, parser: argparse.ArgumentParser) -> 
         return
     import tomllib
 
+    def fail(msg: str) -> None:  # one line, like every other bad input (no usage: the command line was fine)
+        parser.exit(EXIT_USAGE, f"{parser.prog}: error: --config {path}: {msg}\n")
+
     try:
         doc = tomllib.loads(Path(path).read_text(encoding="utf-8"))
-    except (OSError, tomllib.TOMLDecodeError) as exc:
-        parser.error(f"--config {path}: {exc}")
+    except UnicodeDecodeError as exc:
+        fail(f"expected a TOML file (UTF-8 text), found bytes that are not text ({exc.reason} at byte {exc.start})")
+    except OSError as exc:
+        fail(f"cannot read: {exc.strerror or exc}")
+    except tomllib.TOMLDecodeError as exc:
+        fail(f"not valid TOML: {exc}")
+    actions = {a.dest: a for a in parser._actions}
     for key, value in doc.items():
         dest = key.replace("-", "_")
-        if not hasattr(args, dest):
-            parser.error(f"--config {path}: unknown option {key!r}")
+        if not hasattr(args, dest) or dest not in actions:
+            fail(f"unknown option {key!r}")
+        action = actions[dest]
+        try:  # the same checks as on the command line
+            if action.nargs == 0:  # a flag
+                if not isinstance(value, bool):
+                    raise argparse.ArgumentTypeError(f"expected true or false, got {value!r}")
+            elif isinstance(value, (bool, dict)) or (isinstance(value, list) and action.nargs is None
+                                                      and not isinstance(action, argparse._AppendAction)):
+                raise argparse.ArgumentTypeError(f"expected a single value, got {value!r}")
+            elif action.type is not None and not isinstance(value, list):
+                value = action.type(str(value))
+            if action.choices is not None and value not in action.choices:
+                raise argparse.ArgumentTypeError(f"expected one of {', '.join(map(str, action.choices))}, "
+                                                 f"got {value!r}")
+        except (argparse.ArgumentTypeError, ValueError, TypeError) as exc:
+            fail(f"{key}: {exc}")
         if getattr(args, dest) == parser.get_default(dest):
             setattr(args, dest, value)
 
@@ -265,13 +515,19 @@ def _engine_config(args: argparse.Namespace):  # type: ignore[no-untyped-def]
         heading = float(args.heading)
     except (TypeError, ValueError):
         pass
+    from .aiding import FilterSettings
+
+    flt = FilterSettings(spec=_imu_spec(args), aiding=args.aiding, gate=args.gate, lever_arm=args.lever_arm)
     return EngineConfig(lat=args.lat, lon=args.lon, alt=args.alt, heading=heading, declination=args.declination,
                         align=args.align, imu_rates=args.imu_rates, rate=args.rate, samples=args.samples,
-                        gyro_bias=args.gyro_bias, max_gap=args.max_gap)
+                        gyro_bias=args.gyro_bias, max_gap=args.max_gap, attitude=args.attitude, order=args.order,
+                        earth_model=args.earth, vertical=args.vertical, coning=not args.no_coning,
+                        orthonormalize_every=args.orthonormalize_every, position=args.position,
+                        l_every=args.l_every, filter=flt, geoid_height=getattr(args, "geoid_height", 0.0))
 
 
 def _ingest_config(args: argparse.Namespace):  # type: ignore[no-untyped-def]
-    from .ingest import IngestConfig
+    from .link.ingest import IngestConfig
 
     import math
 
@@ -292,22 +548,31 @@ def _add_run(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--master", default="udpin:127.0.0.1:14551", metavar="URL",
                    help="pymavlink connection string to read (udpin:/udpout:/tcp:/serial device)")
     p.add_argument("--out", action="append", default=[], metavar="URL", help="extra output link (repeatable)")
-    p.add_argument("--sysid", type=int, default=None, help="our system id (default: the vehicle's)")
-    p.add_argument("--compid", type=int, default=191, help="our component id (191 = onboard computer)")
-    p.add_argument("--geoid-height", type=float, default=0.0, metavar="M",
+    p.add_argument("--sysid", type=_positive_int(*SYSID), default=None, metavar="ID",
+                   help="our system id (default: the vehicle's)")
+    p.add_argument("--compid", type=_positive_int(1, 255), default=191, metavar="ID",
+                   help="our component id (191 = onboard computer)")
+    p.add_argument("--geoid-height", type=_real(-200.0, 200.0), default=0.0, metavar="M",
                    help="geoid undulation: GLOBAL_POSITION_INT alt = ellipsoidal height - this")
     p.add_argument("--tlog", type=Path, metavar="FILE", help="record every received message (replayable)")
     p.add_argument("-o", "--output", type=Path, metavar="NAV.csv", help="also write each output set as a solution row")
-    p.add_argument("--request-imu", type=float, metavar="HZ", help="ask the autopilot for HIGHRES_IMU at HZ")
+    p.add_argument("--request-imu", type=_real(0.0, 1e4, above=True), metavar="HZ", help="ask the autopilot for HIGHRES_IMU at HZ")
     p.add_argument("--rerun", type=Path, metavar="FILE.rrd", help="record to a Rerun file")
     p.add_argument("--rerun-serve", action="store_true", help="serve the recording for a live Rerun viewer")
-    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds of wall time")
+    p.add_argument("--duration", type=_real(**POSITIVE), metavar="S", help="stop after S seconds of wall time")
     p.add_argument("--signing-key", type=Path, metavar="FILE",
                    help="MAVLink 2 signing key (32 bytes or 64 hex digits, mode 600): input must be signed, "
                         "output is signed (see 'mavins key')")
-    p.add_argument("--peer-timeout", type=float, default=10.0, metavar="S",
+    p.add_argument("--peer-timeout", type=_real(**POSITIVE), default=10.0, metavar="S",
                    help="stop sending to a listening link's peer after S seconds of silence")
-    p.add_argument("--max-peers", type=int, default=8, metavar="N", help="most peers a listening link sends to")
+    p.add_argument("--max-peers", type=_positive_int(1), default=8, metavar="N", help="most peers a listening link sends to")
+    a = p.add_argument_group("for autopilots and ground stations (docs/autopilots.md)")
+    a.add_argument("--odometry-frame", choices=("frd", "ned"), default="frd",
+                   help="ODOMETRY frame_id: MAV_FRAME_LOCAL_FRD or MAV_FRAME_LOCAL_NED")
+    a.add_argument("--gps-input", action="store_true",
+                   help="also publish GPS_INPUT at 5 Hz (ArduPilot GPS_TYPE 14 takes the solution as a GPS)")
+    a.add_argument("--set-origin", action="store_true",
+                   help="send SET_GPS_GLOBAL_ORIGIN to the vehicle once aligned (ArduPilot without GPS)")
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     _nav_options(p)
     p.set_defaults(func=_cmd_run, parser=p)
@@ -324,8 +589,19 @@ def _cmd_run(args: argparse.Namespace) -> int:
     import threading
 
     _apply_config(args, args.parser)
+    from .files import DataFileError, check_outputs
+
+    master = Path(args.master.split(",")[0])  # a serial device or a log file is an input too
+    key_state = args.signing_key.with_name(args.signing_key.name + ".timestamp") if args.signing_key else None
+    try:  # live logs (-o, --tlog, --rerun) are written as they come, so a crash keeps them: no temp-and-rename
+        check_outputs({"-o": args.output, "--tlog": args.tlog, "--rerun": args.rerun},
+                      {"--master": master if master.exists() else None, "--signing-key": args.signing_key,
+                       "--signing-key's timestamp file": key_state, "--config": args.config})
+    except DataFileError as exc:
+        print(f"mavins run: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
     _setup_logging(args.verbose)
-    from .publish import PublishConfig
+    from .link.publish import PublishConfig
     from .service import Service, ServiceConfig
 
     try:
@@ -333,8 +609,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"mavins run: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
-    from .link import PeerPolicy
-    from .signing import KeyFileError, load_key
+    from .link.links import PeerPolicy
+    from .link.signing import KeyFileError, load_key
 
     key = state = None
     if args.signing_key is not None:
@@ -348,14 +624,16 @@ def _cmd_run(args: argparse.Namespace) -> int:
     cfg = ServiceConfig(master=args.master, outs=args.out, sysid=args.sysid, compid=args.compid, tlog=args.tlog,
                         solution=args.output, request_imu=args.request_imu, signing_key=key, signing_state=state,
                         peers=PeerPolicy(timeout=args.peer_timeout, max_peers=args.max_peers),
-                        publish=PublishConfig(geoid_height=args.geoid_height))
+                        publish=PublishConfig(geoid_height=args.geoid_height, gps_input=args.gps_input,
+                                              set_origin=args.set_origin,
+                                              odometry_frame=_ODOMETRY_FRAMES[args.odometry_frame]))
     try:
         svc = Service(engine_cfg, ingest_cfg, cfg)
     except OSError as exc:
         print(f"mavins run: error: cannot open a link: {exc}", file=sys.stderr)
         return EXIT_USAGE
     if args.rerun or args.rerun_serve:
-        from .record import Recorder
+        from .record.recorder import Recorder
 
         rec = Recorder(args.rerun, serve=args.rerun_serve, app="mavins")
         svc.attach_recorder(rec)
@@ -368,7 +646,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         timer = threading.Timer(args.duration, stop.set)
         timer.daemon = True  # a signal may end the run first; never wait for the timer
         timer.start()
-    print(f"mavins run: listening on {args.master}", file=sys.stderr)
+    print(f"mavins run: ready: listening on {args.master}", file=sys.stderr, flush=True)
     summary = svc.run(stop)
     for line in summary.lines():
         print(f"mavins run: {line}", file=sys.stderr)
@@ -392,24 +670,29 @@ def _add_replay(sub: argparse._SubParsersAction) -> None:
 
 def _cmd_replay(args: argparse.Namespace) -> int:
     _apply_config(args, args.parser)
-    from .files import DataFileError
+    from .files import DataFileError, ResourceError, check_outputs
     from .replay import replay
 
     try:
+        check_outputs({"-o": args.output, "--rerun": args.rerun}, {"LOG": args.log, "--config": args.config})
         engine_cfg = _engine_config(args)
-        recorder = None
-        if args.rerun:
-            from .record import Recorder
-
-            recorder = Recorder(args.rerun, serve=False, app="mavins-replay", live=False)
-        res = replay(args.log, engine_cfg, _ingest_config(args), args.output, recorder=recorder)
-    except (DataFileError, ValueError) as exc:
+        res = replay(args.log, engine_cfg, _ingest_config(args), args.output, rerun=args.rerun)
+    except (DataFileError, ResourceError, ValueError) as exc:
         print(f"mavins replay: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except OSError as exc:
+        print(f"mavins replay: error: {exc.filename or args.output}: {exc.strerror or exc}", file=sys.stderr)
         return EXIT_USAGE
     eng = res.pipeline.engine
     print(f"mavins replay: {res.messages} messages, {res.outputs} solution rows to {args.output}; "
           f"final state {eng.state.value}" + (f", heading from {eng.heading_used}" if eng.heading_used else ""),
           file=sys.stderr)
+    if res.report is not None and res.report.damaged:
+        print(f"mavins replay: warning: replayed what could be read: IMU samples from sensor time "
+              f"{res.t_first:.3f} to {res.t_last:.3f} s", file=sys.stderr)
+    for line in res.report.lines() if res.report is not None else ():
+        tag = "" if line.split(": ", 1)[-1].startswith("note:") else "warning: "
+        print(f"mavins replay: {tag}{line}", file=sys.stderr)
     return 0
 
 
@@ -422,27 +705,47 @@ def _add_demo(sub: argparse._SubParsersAction) -> None:
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     p.add_argument("--scenario", default="flight", help="built-in scenario or .toml path")
-    p.add_argument("--duration", type=float, default=120.0, metavar="S", help="simulated seconds")
-    p.add_argument("--speed", default="5", metavar="X|max", help="pace: 1 = real time")
+    p.add_argument("--duration", type=_real(**POSITIVE), default=120.0, metavar="S", help="simulated seconds")
+    p.add_argument("--speed", type=_Speed(), default="5", metavar="X|max", help="pace: 1 = real time")
     p.add_argument("--grade", default="industrial", choices=("ideal", "consumer", "industrial", "tactical", "navigation"))
-    p.add_argument("--heading", default="vehicle", help="heading source for the alignment")
+    p.add_argument("--heading", type=_Heading(), default="vehicle", metavar="DEG|SOURCE",
+                   help="heading source for the alignment")
     p.add_argument("--rerun", type=Path, default=Path("mavins-demo.rrd"), metavar="FILE.rrd", help="recording to write")
     p.add_argument("--rerun-serve", action="store_true", help="also serve the recording to a live viewer")
     p.add_argument("--no-rerun", action="store_true", help="do not record")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=_positive_int(0), default=0, metavar="N", help="random seed of the sensor errors")
     p.set_defaults(func=_cmd_demo)
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
     import threading
 
+    from .files import DataFileError, ResourceError, check_outputs
+    from sim.generate import check_size
+    from sim.scenarios import ScenarioError, load
+
+    try:  # the scenario, the size of the run and the recording's path are checked before anything starts
+        scenario = load(args.scenario)
+        check_size(scenario, duration=args.duration, rate=None)
+        check_outputs({"--rerun": None if args.no_rerun else args.rerun}, {"--scenario": Path(scenario.source)})
+    except (ScenarioError, UnicodeDecodeError, OSError) as exc:
+        print(f"mavins demo: error: {_scenario_error(args.scenario, exc)}", file=sys.stderr)
+        return EXIT_USAGE
+    except (DataFileError, ResourceError, ValueError) as exc:
+        print(f"mavins demo: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
     _setup_logging(False)
     from .demo import run_demo
 
     speed = None if args.speed == "max" else float(args.speed)
+    heading: float | str = args.heading
+    try:
+        heading = float(args.heading)
+    except ValueError:
+        pass
     stop = threading.Event()
     try:
-        report = run_demo(args.scenario, args.duration, speed, args.grade, args.heading,
+        report = run_demo(args.scenario, args.duration, speed, args.grade, heading,  # type: ignore[arg-type]
                           None if args.no_rerun else args.rerun, args.rerun_serve, args.seed, stop)
     except KeyboardInterrupt:
         stop.set()
@@ -469,10 +772,9 @@ def _add_key(sub: argparse._SubParsersAction) -> None:
 
 
 def _cmd_key(args: argparse.Namespace) -> int:
-    import os
     import secrets
 
-    from .signing import key_from_passphrase
+    from .link.signing import key_from_passphrase
 
     if args.file.exists() and not args.force:
         print(f"mavins key: error: {args.file} exists (use --force to overwrite)", file=sys.stderr)
@@ -482,16 +784,24 @@ def _cmd_key(args: argparse.Namespace) -> int:
     except UnicodeEncodeError:
         print("mavins key: error: the passphrase must be ASCII (MAVProxy hashes its ASCII bytes)", file=sys.stderr)
         return EXIT_USAGE
-    fd = os.open(args.file, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-    os.fchmod(fd, 0o600)  # an existing file keeps its old mode through O_TRUNC: close it before writing
-    with os.fdopen(fd, "w") as fh:
-        fh.write(key.hex() + "\n")
+    from .files import DataFileError, atomic_output
+
+    if args.file.is_dir():
+        print(f"mavins key: error: {args.file} is a directory, expected a file to write", file=sys.stderr)
+        return EXIT_USAGE
+    try:  # mode 600 from the first byte; renamed into place (an existing key is replaced whole, or kept)
+        with atomic_output(args.file, mode=0o600) as tmp, open(tmp, "w", encoding="ascii") as fh:
+            fh.write(key.hex() + "\n")
+    except (DataFileError, OSError) as exc:
+        text = str(exc) if isinstance(exc, DataFileError) else f"{args.file}: cannot write: {exc.strerror or exc}"
+        print(f"mavins key: error: {text}", file=sys.stderr)
+        return EXIT_USAGE
     print(f"mavins key: wrote {args.file} (mode 600)", file=sys.stderr)
     return 0
 
 
 def _add_review(sub: argparse._SubParsersAction) -> None:
-    from .review import DESCRIPTION, add_arguments, run
+    from .record.review import DESCRIPTION, add_arguments, run
 
     p = sub.add_parser("review", help="render a Rerun recording to PNG, headless", description=DESCRIPTION)
     add_arguments(p)
@@ -510,6 +820,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_nav(sub)
     for add in _EXTRA_COMMANDS:
         add(sub)
+    _show_ranges(parser)
     return parser
 
 
@@ -532,11 +843,34 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return EXIT_USAGE
+    import signal
+    import threading
+
+    previous = None
+    if args.command in OFFLINE_COMMANDS and threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGTERM, _terminate)  # unwind like Ctrl-C: temporary outputs removed
     try:
         return int(args.func(args))
     except KeyboardInterrupt:
         print("mavins: interrupted", file=sys.stderr)
         return 130
+    except _Terminated:
+        print("mavins: terminated", file=sys.stderr)
+        return 143
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+OFFLINE_COMMANDS = ("nav", "sim", "replay", "review", "key")
+
+
+class _Terminated(BaseException):
+    """SIGTERM in an offline tool: raised so that every temporary output is removed on the way out."""
+
+
+def _terminate(signum: int, frame: object) -> None:
+    raise _Terminated()
 
 
 if __name__ == "__main__":

@@ -51,6 +51,10 @@ class EngineConfig:
     order: str = "exact"
     earth_model: str = "wgs84"
     vertical: str = "free"
+    coning: bool = True
+    orthonormalize_every: int = 1
+    position: str = "trapezoidal"
+    l_every: int = 1
     motion_gyro: float = 0.1  # rad/s: a sample above this restarts the alignment
     motion_accel: float = 1.5  # m/s^2: |f| - g beyond this restarts the alignment
     max_gap: float = 1.0  # s: a longer gap in sensor time is not integrated; the solution is degraded
@@ -104,6 +108,8 @@ class Engine:
         self._kcfg = sd.make_config(
             samples=self.cfg.samples, attitude=self.cfg.attitude, order=self.cfg.order,
             earth_model=self.cfg.earth_model, vertical=self.cfg.vertical, imu_rates=self.cfg.imu_rates,
+            coning=self.cfg.coning, orthonormalize_every=self.cfg.orthonormalize_every,
+            position=self.cfg.position, l_every=self.cfg.l_every,
         )
         if None not in (self.cfg.lat, self.cfg.lon, self.cfg.alt):
             self.set_position(float(self.cfg.lat), float(self.cfg.lon), float(self.cfg.alt), "options")  # type: ignore[arg-type]
@@ -295,11 +301,11 @@ class Engine:
 
     # -- measurements from other messages ----------------------------------------
     def on_gnss(self, t: float | None, lat: float, lon: float, h: float, vel: tuple[float, float, float] | None,
-                sigma_h: float, sigma_v: float, sigma_vel: float) -> None:
+                sigma_h: float, sigma_v: float, sigma_vel: float, source: str = "GNSS") -> None:
         """A GNSS fix (deg, deg, ellipsoidal m; NED m/s or None; 1-sigma m, m, m/s) stamped t on the
         IMU clock (None: now). Before navigation it gives the initial position."""
         if self.state is not State.NAVIGATING or self._s is None:
-            self.set_position(lat, lon, h, "GNSS", sigma_h)
+            self.set_position(lat, lon, h, source, sigma_h)
             return
         t_m = sd.state_time(self._s) if t is None else t
         self.filter.measure(self._s, self._kcfg, t_m, "gnss", math.radians(lat), math.radians(lon), h, vel,

@@ -3,6 +3,12 @@
 Every reading error is a :class:`DataFileError` whose message names the file,
 the line and the column, so the command line can print one clear line.
 Floats are written with round-trip precision (CONVENTIONS.md "Files").
+
+Every offline writer goes through :func:`atomic_outputs`: the data goes to a
+temporary file beside the target and is renamed into place only when the
+whole job succeeded, so an error or Ctrl-C never leaves a partial or empty
+file and never damages an existing one (docs/reliability.md, "Offline tools
+on bad input"). :func:`check_outputs` refuses an output that is also an input.
 """
 
 from __future__ import annotations
@@ -11,7 +17,12 @@ import csv
 import io
 import json
 import math
+import os
+import shutil
+import tempfile
 import warnings
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -25,6 +36,212 @@ INIT_KEYS = ("t", "lat", "lon", "h", "vn", "ve", "vd", "roll", "pitch", "yaw")
 
 class DataFileError(ValueError):
     """A data file that cannot be used, with a message naming where and why."""
+
+
+class ResourceError(ValueError):
+    """A request that needs more memory or disk than the machine has (the message has the estimate)."""
+
+
+# -- outputs: refuse clashes, write beside the target, rename on success -------
+
+
+def _same_path(a: Path, b: Path) -> bool:
+    try:
+        if a.exists() and b.exists():
+            return os.path.samefile(a, b)
+    except OSError:
+        pass
+    return os.path.realpath(a) == os.path.realpath(b)
+
+
+def check_outputs(outputs: Mapping[str, Path | None], inputs: Mapping[str, Path | None]) -> None:
+    """Refuse an output that is also an input, two outputs to one file, or an output that is a directory.
+
+    Keys are the names the user knows them by (``-o``, ``--init``, ``LOG``); None values are skipped.
+    """
+    outs = [(k, Path(v)) for k, v in outputs.items() if v is not None]
+    ins = [(k, Path(v)) for k, v in inputs.items() if v is not None]
+    for i, (name, out) in enumerate(outs):
+        if out.is_dir():
+            raise DataFileError(f"{out}: {name} names a directory, expected a file to write")
+        for in_name, inp in ins:
+            if _same_path(out, inp):
+                raise DataFileError(f"{out}: {name} is also the input {in_name}: writing it would destroy the "
+                                    "input; choose another output file")
+        for other_name, other in outs[i + 1:]:
+            if _same_path(out, other):
+                raise DataFileError(f"{out}: {name} and {other_name} name the same file; choose two files")
+
+
+def _umask() -> int:
+    try:
+        with open("/proc/self/status", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    mask = os.umask(0o022)  # no /proc: read it the portable way (and put it back)
+    os.umask(mask)
+    return mask
+
+
+def _make_parents(directory: Path) -> list[Path]:
+    """Create ``directory`` and missing parents; return those created, deepest first."""
+    made: list[Path] = []
+    d = directory
+    while not d.exists() and d != d.parent:
+        made.append(d)
+        d = d.parent
+    for m in reversed(made):
+        m.mkdir(exist_ok=True)
+    return made
+
+
+@contextmanager
+def atomic_outputs(targets: Sequence[Path | None], *, mode: int | None = None) -> Iterator[list[Path | None]]:
+    """Temporary files beside ``targets``, renamed onto them when the block ends without an exception.
+
+    ``with atomic_outputs([a, b]) as (ta, tb): write(ta); write(tb)``. On any
+    exception (an error, Ctrl-C) the temporary files are removed, directories
+    made for them too, and the targets are left as they were; on success each
+    is flushed to disk and renamed into place (an existing target is replaced
+    in one step, keeping its permission bits). ``mode`` sets the permission
+    bits of new files (default: 0666 less the umask). None targets give None.
+    OSError while creating or renaming is raised as :class:`DataFileError`.
+    """
+    tmps: list[Path | None] = []
+    made: list[Path] = []
+    reals: list[Path | None] = []
+    try:
+        for target in targets:
+            if target is None:
+                tmps.append(None)
+                reals.append(None)
+                continue
+            real = Path(os.path.realpath(target))  # a symlink target is written through, like open(..., "w")
+            try:
+                made += _make_parents(real.parent)
+                fd, name = tempfile.mkstemp(dir=real.parent, prefix=f".{real.name}.", suffix=f".tmp{real.suffix}")
+            except OSError as exc:
+                raise DataFileError(f"{target}: cannot write: {exc.strerror or exc}") from None
+            os.close(fd)
+            if mode is not None:
+                bits = mode
+            elif real.exists():
+                bits = real.stat().st_mode & 0o7777
+            else:
+                bits = 0o666 & ~_umask()
+            os.chmod(name, bits)
+            tmps.append(Path(name))
+            reals.append(real)
+        yield tmps
+        for tmp, real, target in zip(tmps, reals, targets):
+            if tmp is None or real is None:
+                continue
+            try:
+                with open(tmp, "rb") as fh:
+                    os.fsync(fh.fileno())
+                os.replace(tmp, real)
+            except OSError as exc:
+                raise DataFileError(f"{target}: cannot write: {exc.strerror or exc}") from None
+    except BaseException:
+        for tmp in tmps:
+            if tmp is not None:
+                try:
+                    tmp.unlink()
+                except OSError:
+                    pass
+        for d in made:  # deepest first; only if still empty
+            try:
+                d.rmdir()
+            except OSError:
+                pass
+        raise
+
+
+@contextmanager
+def atomic_output(target: Path, *, mode: int | None = None) -> Iterator[Path]:
+    """:func:`atomic_outputs` for one file: yields the temporary path to write."""
+    with atomic_outputs([target], mode=mode) as (tmp,):
+        assert tmp is not None
+        yield tmp
+
+
+# -- what a file is: its first bytes -----------------------------------------------------------
+
+FOUND = {".ulg": "a PX4 ULog", ".bin": "an ArduPilot DataFlash log", ".tlog": "a MAVLink telemetry log",
+         ".rrd": "a Rerun recording", ".gz": "a gzip file", ".zip": "a zip file", "text": "a text file"}
+
+
+def sniff(head: bytes) -> str | None:
+    """The format the first bytes of a file say (a key of FOUND), None if they say nothing."""
+    if head.startswith(b"ULog\x01\x12\x35"):
+        return ".ulg"
+    if head.startswith(b"\xa3\x95"):
+        return ".bin"
+    if head.startswith(b"RRF"):
+        return ".rrd"
+    if head.startswith(b"\x1f\x8b"):
+        return ".gz"
+    if head.startswith(b"PK\x03\x04"):
+        return ".zip"
+    if len(head) >= 16 and head[8] in (0xFD, 0xFE):
+        return ".tlog"  # a weak sign: 8 time bytes, then a MAVLink frame marker
+    try:
+        text = head.decode("utf-8")
+    except UnicodeDecodeError:
+        return None
+    if text and all(c.isprintable() or c in "\r\n\t" for c in text):
+        return "text"
+    return None
+
+
+# -- sizes: refuse what the machine cannot hold --------------------------------
+
+
+def available_memory() -> int:
+    """Bytes of memory available for a new allocation (MemAvailable; else physical memory)."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):
+        return 1 << 62  # unknown: do not refuse
+
+
+def free_disk(path: Path) -> int:
+    """Free bytes on the file system that holds ``path`` (or its nearest existing parent)."""
+    p = Path(os.path.abspath(path))
+    while not p.exists() and p != p.parent:
+        p = p.parent
+    try:
+        return shutil.disk_usage(p).free
+    except OSError:
+        return 1 << 62
+
+
+def gib(n: float) -> str:
+    """Bytes as GiB (or MiB below 1 GiB) for messages."""
+    return f"{n / 2**30:.1f} GiB" if n >= 2**30 else f"{n / 2**20:.0f} MiB"
+
+
+def check_resources(what: str, *, memory: float = 0.0, disk: float = 0.0, disk_at: Path | None = None,
+                    hint: str = "") -> None:
+    """Raise :class:`ResourceError` if ``memory`` or ``disk`` bytes (estimates) exceed what is free."""
+    avail = available_memory()
+    if memory > avail:
+        raise ResourceError(f"{what} needs about {gib(memory)} of memory, the machine has {gib(avail)} "
+                            f"available{hint}")
+    if disk and disk_at is not None:
+        free = free_disk(disk_at)
+        if disk > free:
+            raise ResourceError(f"{what} needs about {gib(disk)} of disk, {disk_at} has {gib(free)} free{hint}")
 
 
 @dataclass(frozen=True)
@@ -54,27 +271,6 @@ def _open_text(path: Path) -> io.TextIOBase:
     return open(path, encoding="utf-8", newline="")
 
 
-def _file_line(path: Path, data_row: int) -> int:
-    """File line number (1-based) of a data row, counting the blank lines numpy skips."""
-    with _open_text(path) as fh:
-        next(fh)
-        seen = -1
-        for lineno, line in enumerate(fh, start=2):
-            if line.strip():
-                seen += 1
-                if seen == data_row:
-                    return lineno
-    return data_row + 2
-
-
-def _locate_bad_cell(path: Path, header: list[str], wanted: tuple[str, ...]) -> str:
-    """Slow second pass that finds the first cell which is not a number."""
-    try:
-        return _scan_cells(path, header, wanted)
-    except UnicodeDecodeError:
-        return _bad_text(path)
-
-
 def _bad_text(path: Path) -> str:
     """Message naming the first line that is not UTF-8."""
     import gzip
@@ -89,22 +285,175 @@ def _bad_text(path: Path) -> str:
     return f"{path}: not UTF-8 text"
 
 
-def _scan_cells(path: Path, header: list[str], wanted: tuple[str, ...]) -> str:
-    idx = {name: header.index(name) for name in wanted}
-    with _open_text(path) as fh:
-        reader = csv.reader(fh)
-        next(reader)
-        for lineno, row in enumerate(reader, start=2):
+CHUNK_BYTES = 32 << 20  # text read per chunk by TableReader (about 250,000 IMU rows)
+
+
+class TableReader:
+    """The named columns of a CSV in chunks of rows, checked like :func:`read_table`.
+
+    Opening checks the file and its header; :meth:`chunks` yields (n, k)
+    arrays of consecutive data rows, so a file larger than memory can be
+    processed in constant memory. Every error is a :class:`DataFileError`
+    naming the file line (blank lines counted) and the column, exactly as
+    :func:`read_table` reports it; an empty table is an error at the end.
+    """
+
+    def __init__(self, path: str | Path, columns: tuple[str, ...], *, strictly_increasing: bool = True,
+                 chunk_bytes: int | None = None) -> None:
+        self.path = path = Path(path)
+        self.columns = columns
+        self.strictly_increasing = strictly_increasing
+        self.chunk_bytes = max(int(CHUNK_BYTES if chunk_bytes is None else chunk_bytes), 1)
+        self.rows = 0
+        if not path.is_file():
+            raise DataFileError(f"{path}: no such file")
+        if path.stat().st_size == 0:
+            raise DataFileError(f"{path}: line 1: the file is empty (expected a CSV with the header "
+                                f"{','.join(columns)})")
+        try:
+            with _open_text(path) as fh:
+                header_line = fh.readline()
+        except UnicodeDecodeError:
+            raise DataFileError(_bad_text(path)) from None
+        except (OSError, EOFError) as exc:
+            raise DataFileError(f"{path}: cannot read: {exc}") from None
+        self.header = header = [h.strip() for h in header_line.strip().split(",")]
+        missing = [c for c in columns if c not in header]
+        if missing:
+            raise DataFileError(
+                f"{path}: line 1: missing column(s) {', '.join(missing)} (header has: {', '.join(header)})"
+            )
+        self.usecols = [header.index(c) for c in columns]
+
+    def estimated_rows(self) -> int:
+        """Data rows, estimated from the file size and the first 64 kB (uncompressed files only)."""
+        size = self.path.stat().st_size
+        if self.path.suffix == ".gz":
+            size *= 4  # typical ratio of a CSV of floats
+        with _open_text(self.path) as fh:
+            try:
+                head = fh.read(1 << 16)
+            except (UnicodeDecodeError, OSError, EOFError):
+                return 0
+        lines = [ln for ln in head.splitlines()[1:-1] if ln.strip()]
+        if not lines:
+            return 1
+        return int(size / (sum(len(ln) + 1 for ln in lines) / len(lines)))
+
+    def chunks(self) -> Iterator[np.ndarray]:
+        """Consecutive (n, k) arrays of data rows (one array for a file of up to 4 chunks: numpy reads it faster)."""
+        if self.path.suffix != ".gz" and self.path.stat().st_size <= 4 * self.chunk_bytes:
+            yield self._whole()
+            return
+        path = self.path
+        last_t: float | None = None
+        line0 = 2  # file line of the first line in the chunk
+        try:
+            fh = _open_text(path)
+        except OSError as exc:
+            raise DataFileError(f"{path}: cannot read: {exc}") from None
+        with fh:
+            try:
+                fh.readline()
+                while True:
+                    lines = fh.readlines(self.chunk_bytes)
+                    if not lines:
+                        break
+                    data = self._parse(lines, line0)
+                    if data.shape[0]:
+                        last_t = self._check(data, lambda: lines, line0, last_t)
+                        self.rows += data.shape[0]
+                        yield data
+                    line0 += len(lines)
+            except UnicodeDecodeError:
+                raise DataFileError(_bad_text(path)) from None
+            except (OSError, EOFError) as exc:  # EOFError: a cut .gz
+                raise DataFileError(f"{path}: cannot read: {exc}") from None
+        if self.rows == 0:
+            raise DataFileError(f"{path}: no data rows")
+
+    def _whole(self) -> np.ndarray:
+        """The whole file in one array (numpy reads the file itself); lines are read only to locate an error."""
+        path = self.path
+
+        def lines() -> list[str]:
+            with _open_text(path) as fh:
+                fh.readline()
+                return fh.readlines()
+
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", UserWarning)  # "input contained no data": reported below
+                data = np.loadtxt(path, delimiter=",", skiprows=1, usecols=self.usecols, ndmin=2, dtype=np.float64,
+                                  encoding="utf-8")
+        except UnicodeDecodeError:
+            raise DataFileError(_bad_text(path)) from None
+        except (ValueError, IndexError):
+            raise DataFileError(self._bad_cell(lines(), 2)) from None
+        except OSError as exc:
+            raise DataFileError(f"{path}: cannot read: {exc}") from None
+        if data.shape[0] == 0:
+            raise DataFileError(f"{path}: no data rows")
+        self._check(data, lines, 2, None)
+        self.rows = data.shape[0]
+        return data
+
+    def _parse(self, lines: list[str], line0: int) -> np.ndarray:
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", UserWarning)  # "input contained no data": counted by the caller
+                return np.loadtxt(lines, delimiter=",", usecols=self.usecols, ndmin=2, dtype=np.float64)
+        except (ValueError, IndexError):
+            raise DataFileError(self._bad_cell(lines, line0)) from None
+
+    def _bad_cell(self, lines: list[str], line0: int) -> str:
+        """Slow second pass over the chunk that finds the first cell which is not a number."""
+        idx = {name: self.header.index(name) for name in self.columns}
+        for lineno, row in enumerate(csv.reader(lines), start=line0):
             if not row:
                 continue
             for name, j in idx.items():
                 if j >= len(row):
-                    return f"{path}: line {lineno}: column '{name}' is missing (row has {len(row)} fields)"
+                    return f"{self.path}: line {lineno}: column '{name}' is missing (row has {len(row)} fields)"
                 try:
                     float(row[j])
                 except ValueError:
-                    return f"{path}: line {lineno}, column '{name}': not a number: {row[j]!r}"
-    return f"{path}: cannot parse as CSV numbers"
+                    return f"{self.path}: line {lineno}, column '{name}': not a number: {row[j]!r}"
+        return f"{self.path}: cannot parse as CSV numbers"
+
+    @staticmethod
+    def _line_of(lines: list[str], line0: int, data_row: int) -> int:
+        """File line of a data row of the chunk, counting the blank lines numpy skips."""
+        seen = -1
+        for k, line in enumerate(lines):
+            if line.strip():
+                seen += 1
+                if seen == data_row:
+                    return line0 + k
+        return line0 + data_row
+
+    def _check(self, data: np.ndarray, lines: Callable[[], list[str]], line0: int, last_t: float | None) -> float:
+        path, columns = self.path, self.columns
+        bad = ~np.isfinite(data)
+        if bad.any():
+            i, j = np.argwhere(bad)[0]
+            raise DataFileError(
+                f"{path}: line {self._line_of(lines(), line0, i)}, column '{columns[j]}': "
+                f"value {float(data[i, j])!r} is not finite"
+            )
+        if self.strictly_increasing:
+            t = data[:, 0] if last_t is None else np.concatenate(([last_t], data[:, 0]))
+            nonpos = np.flatnonzero(~(np.diff(t) > 0))
+            if nonpos.size:
+                i = nonpos[0] + 1  # index in t
+                prev = float(t[i - 1])
+                if last_t is not None:
+                    i -= 1  # index in data
+                raise DataFileError(
+                    f"{path}: line {self._line_of(lines(), line0, i)}, column 't': time {float(data[i, 0])!r} "
+                    f"does not increase (previous row has {prev!r})"
+                )
+        return float(data[-1, 0])
 
 
 def read_table(path: str | Path, columns: tuple[str, ...], *, strictly_increasing: bool = True) -> np.ndarray:
@@ -113,47 +462,9 @@ def read_table(path: str | Path, columns: tuple[str, ...], *, strictly_increasin
     Raises DataFileError for a missing file or column, a non-numeric cell, a
     NaN/Inf value, an empty table, or a time column that does not increase.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise DataFileError(f"{path}: no such file")
-    try:
-        with _open_text(path) as fh:
-            header_line = fh.readline()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise DataFileError(f"{path}: cannot read: {exc}") from None
-    header = [h.strip() for h in header_line.strip().split(",")]
-    missing = [c for c in columns if c not in header]
-    if missing:
-        raise DataFileError(
-            f"{path}: line 1: missing column(s) {', '.join(missing)} (header has: {', '.join(header)})"
-        )
-    usecols = [header.index(c) for c in columns]
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", UserWarning)  # "input contained no data": reported below
-            data = np.loadtxt(path, delimiter=",", skiprows=1, usecols=usecols, ndmin=2, dtype=np.float64)
-    except (ValueError, IndexError):
-        raise DataFileError(_locate_bad_cell(path, header, columns)) from None
-    except UnicodeDecodeError:
-        raise DataFileError(_bad_text(path)) from None
-    if data.shape[0] == 0:
-        raise DataFileError(f"{path}: no data rows")
-    bad = ~np.isfinite(data)
-    if bad.any():
-        i, j = np.argwhere(bad)[0]
-        raise DataFileError(
-            f"{path}: line {_file_line(path, i)}, column '{columns[j]}': value {float(data[i, j])!r} is not finite"
-        )
-    if strictly_increasing and data.shape[0] > 1:
-        steps = np.diff(data[:, 0])
-        nonpos = np.flatnonzero(~(steps > 0))
-        if nonpos.size:
-            i = nonpos[0] + 1
-            raise DataFileError(
-                f"{path}: line {_file_line(path, i)}, column 't': time {float(data[i, 0])!r} does not increase "
-                f"(previous row has {float(data[i - 1, 0])!r})"
-            )
-    return data
+    reader = TableReader(path, columns, strictly_increasing=strictly_increasing)
+    parts = list(reader.chunks())
+    return parts[0] if len(parts) == 1 else np.concatenate(parts)
 
 
 def read_init(path: str | Path) -> InitialState:

@@ -7,6 +7,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from . import files
 
 
@@ -28,53 +30,163 @@ class NavOptions:
     timing: bool = False
 
 
+SOLUTION_ROW_BYTES = 14 * 21  # typical text of one solution row (17 significant digits, commas)
+
+
 def run_nav(imu_path: Path, init_path: Path, out_path: Path, opts: NavOptions) -> int:
     """Read the IMU file and initial state, integrate, write the solution.
 
+    The file is read, integrated and written in chunks of rows with one kernel
+    state carried across them (bit-identical to a whole-array run), so memory
+    stays flat however long the file is. The solution goes to a temporary file
+    beside ``out_path``, renamed into place only when the whole file was good.
     Returns the number of solution rows written. Raises files.DataFileError
-    for unusable input.
+    for unusable input (or an output that is also an input) and
+    files.ResourceError when the solution would not fit on the disk.
     """
+    from .core import strapdown as sd
+    from .core.runner import initial_state, to_file_units
+
     t_start = time.perf_counter()
+    files.check_outputs({"-o": out_path}, {"IMU": imu_path, "--init": init_path})
     init = files.read_init(init_path)
     columns = files.INCREMENT_COLUMNS if opts.input == "increments" else files.RATE_COLUMNS
-    table = files.read_table(imu_path, columns)
-    if opts.input == "increments" and table[0, 0] <= init.t:
-        raise files.DataFileError(
-            f"{imu_path}: line 2, column 't': first increment time {table[0, 0]!r} is not after the "
-            f"initial state's t = {init.t!r} (row i covers (t[i-1], t[i]])"
-        )
-    t_read = time.perf_counter()
-
-    from .core.runner import navigate
-
-    sol = navigate(
-        table[:, 0],
-        table[:, 1:4],
-        table[:, 4:7],
-        init.to_dict(),
-        data=opts.input,
-        samples=opts.samples,
-        attitude=opts.attitude,
-        order=opts.order,
-        earth_model=opts.earth,
-        orthonormalize_every=opts.orthonormalize_every,
-        vertical=opts.vertical,
-        coning=not opts.no_coning,
-        position=opts.position,
-        l_every=opts.l_every,
-        imu_rates=opts.imu_rates,
-    )
-    t_compute = time.perf_counter()
-    try:
-        out_path.parent.mkdir(parents=True, exist_ok=True)
-        files.write_table(out_path, files.SOLUTION_COLUMNS, sol)
-    except OSError as exc:
-        raise files.DataFileError(f"{out_path}: cannot write: {exc.strerror or exc}") from None
-    t_write = time.perf_counter()
+    reader = files.TableReader(imu_path, columns)
+    est_rows = reader.estimated_rows() // opts.samples
+    files.check_resources(f"the solution ({est_rows:,} rows, estimated)", disk=est_rows * SOLUTION_ROW_BYTES,
+                          disk_at=out_path.parent)
+    cfg = sd.make_config(samples=opts.samples, attitude=opts.attitude, order=opts.order, earth_model=opts.earth,
+                         orthonormalize_every=opts.orthonormalize_every, vertical=opts.vertical,
+                         coning=not opts.no_coning, position=opts.position, l_every=opts.l_every,
+                         imu_rates=opts.imu_rates)
+    run = sd.run_increments if opts.input == "increments" else sd.run_rates
+    state = initial_state(init.to_dict())
+    t_read = time.perf_counter() - t_start
+    t_compute = t_write = 0.0
+    rows = 0
+    with files.atomic_output(out_path) as tmp:
+        t0 = time.perf_counter()
+        try:
+            with open(tmp, "w", encoding="utf-8", newline="") as fh:
+                fh.write(",".join(files.SOLUTION_COLUMNS) + "\n")
+                t_write += time.perf_counter() - t0
+                t0 = time.perf_counter()
+                first = True
+                for table in reader.chunks():
+                    if first and opts.input == "increments" and table[0, 0] <= init.t:
+                        raise files.DataFileError(
+                            f"{imu_path}: line 2, column 't': first increment time {table[0, 0]!r} is not after "
+                            f"the initial state's t = {init.t!r} (row i covers (t[i-1], t[i]])"
+                        )
+                    first = False
+                    t1 = time.perf_counter()
+                    t_read += t1 - t0
+                    out = np.empty((table.shape[0] // opts.samples + 1, sd.OUT_SIZE))
+                    m = run(state, cfg, np.ascontiguousarray(table[:, 0]), np.ascontiguousarray(table[:, 1:4]),
+                            np.ascontiguousarray(table[:, 4:7]), out)
+                    sol = to_file_units(out[:m])
+                    t2 = time.perf_counter()
+                    t_compute += t2 - t1
+                    fh.write(files.format_rows(sol))
+                    rows += m
+                    t0 = time.perf_counter()
+                    t_write += t0 - t2
+                t_read += time.perf_counter() - t0
+                t0 = time.perf_counter()
+        except OSError as exc:  # the reader turns its own errors into DataFileError: this is the output
+            raise files.DataFileError(f"{out_path}: cannot write: {exc.strerror or exc}") from None
+    t_write += time.perf_counter() - t0  # flush and rename
     if opts.timing:
         print(
-            f"timing: samples={table.shape[0]} read_s={t_read - t_start:.3f} "
-            f"compute_s={t_compute - t_read:.3f} write_s={t_write - t_compute:.3f}",
+            f"timing: samples={reader.rows} read_s={t_read:.3f} "
+            f"compute_s={t_compute:.3f} write_s={t_write:.3f}",
             file=sys.stderr,
         )
-    return sol.shape[0]
+    return rows
+
+
+
+GNSS_REQUIRED = ("t", "lat", "lon", "h")
+GNSS_OPTIONAL = ("vn", "ve", "vd", "sigma_h", "sigma_v", "sigma_vel")
+BARO_REQUIRED = ("t", "h")
+BARO_OPTIONAL = ("sigma",)
+
+
+def read_aiding(path: Path, required: tuple[str, ...], optional: tuple[str, ...]) -> np.ndarray:
+    """A GNSS or baro file (docs/conventions.md "Aided navigation"): the required columns, then
+    the optional ones (NaN where absent or empty), rows sorted by t."""
+    try:
+        with open(path, encoding="utf-8") as fh:
+            header = [c.strip() for c in fh.readline().strip().split(",")]
+    except (OSError, UnicodeDecodeError) as exc:
+        raise files.DataFileError(f"{path}: cannot read: {getattr(exc, 'strerror', None) or exc}") from None
+    missing = [c for c in required if c not in header]
+    if missing:
+        raise files.DataFileError(f"{path}: missing column(s) {', '.join(missing)} (header: {','.join(header)})")
+    cols = required + tuple(c for c in optional if c in header)
+    data = files.read_table(path, required, strictly_increasing=False) if cols == required else None
+    if data is None:
+        raw = np.genfromtxt(path, delimiter=",", skip_header=1, usecols=[header.index(c) for c in cols],
+                            ndmin=2, invalid_raise=False)
+        if raw.size == 0:
+            raw = np.empty((0, len(cols)))
+        if not np.all(np.isfinite(raw[:, 0])):
+            raise files.DataFileError(f"{path}: column 't' holds a value that is not a finite number")
+        data = raw
+    if data.shape[0] and np.any(np.diff(data[:, 0]) < 0.0):
+        row = int(np.argmax(np.diff(data[:, 0]) < 0.0)) + 3
+        raise files.DataFileError(f"{path}: line {row}, column 't': time goes back")
+    out = np.full((data.shape[0], len(required) + len(optional)), np.nan)
+    for j, c in enumerate(cols):
+        out[:, (required + optional).index(c)] = data[:, j]
+    return out
+
+
+def run_nav_aided(imu_path: Path, init_path: Path, out_path: Path, opts: NavOptions, gnss_path: Path | None,
+                  baro_path: Path | None, spec: str | dict, lever_arm: tuple[float, float, float],
+                  gate: float) -> tuple[int, dict]:
+    """``mavins nav --gnss/--baro``: the strapdown solution with the error-state filter
+    (core/aided.py), written with the filter's 21 columns after the 14 solution columns.
+    Returns the rows written and the measurement counts (accepted, rejected) by kind."""
+    import json
+
+    from .core import aided
+
+    files.check_outputs({"-o": out_path}, {"IMU": imu_path, "--init": init_path, "--gnss": gnss_path,
+                                          "--baro": baro_path})
+    init = files.read_init(init_path)
+    init_keys = init.to_dict()
+    try:  # the optional initial uncertainty keys of the initial-state JSON
+        raw = json.loads(Path(init_path).read_text())
+        for k in ("sigma_pos", "sigma_vel", "sigma_level", "sigma_yaw"):
+            if k in raw:
+                v = raw[k]
+                if not isinstance(v, (int, float)) or isinstance(v, bool) or not 0.0 < v < 1e7:
+                    raise files.DataFileError(f"{init_path}: {k} must be a positive number, got {v!r}")
+                init_keys[k] = float(v)
+    except (OSError, ValueError) as exc:
+        if isinstance(exc, files.DataFileError):
+            raise
+        raise files.DataFileError(f"{init_path}: {exc}") from None
+    if opts.input == "rates" and opts.imu_rates == "sampled":
+        raise files.DataFileError("the filter takes increments or averaged rates; sampled rates are not supported "
+                                  "with --gnss/--baro")
+    columns = files.INCREMENT_COLUMNS if opts.input == "increments" else files.RATE_COLUMNS
+    imu = files.read_table(imu_path, columns)
+    if opts.input == "rates":
+        imu = imu[imu[:, 0] > init.t]
+        dt = np.diff(np.concatenate(([init.t], imu[:, 0])))[:, None]
+        imu = np.column_stack([imu[:, 0], imu[:, 1:7] * dt])
+    gnss = read_aiding(gnss_path, GNSS_REQUIRED, GNSS_OPTIONAL) if gnss_path is not None else None
+    baro = read_aiding(baro_path, BARO_REQUIRED, BARO_OPTIONAL) if baro_path is not None else None
+    try:
+        rows, stats = aided.navigate_aided(
+            imu, init_keys, gnss, baro, spec=spec, lever_arm=lever_arm, gate=gate, samples=opts.samples,
+            attitude=opts.attitude, order=opts.order, earth_model=opts.earth,
+            orthonormalize_every=opts.orthonormalize_every, vertical=opts.vertical, coning=not opts.no_coning,
+            position=opts.position, l_every=opts.l_every)
+    except ValueError as exc:
+        raise files.DataFileError(str(exc)) from None
+    with files.atomic_output(out_path) as tmp:
+        files.write_table(tmp, aided.OUT_COLUMNS, rows)
+    return rows.shape[0], stats["counts"]

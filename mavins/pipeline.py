@@ -72,7 +72,7 @@ class Pipeline:
                 self.counters["gnss_no_fix"] += 1
             else:
                 t, lat, lon, h, vel, sig_h, sig_v, sig_vel = fix
-                self.engine.on_gnss(self._on_imu_clock(t), lat, lon, h, vel, sig_h, sig_v, sig_vel)
+                self.engine.on_gnss(self._on_imu_clock(t), lat, lon, h, vel, sig_h, sig_v, sig_vel, name)
         elif name == "SCALED_PRESSURE" and math.isfinite(msg.press_abs) and msg.press_abs > 0.0:  # type: ignore[attr-defined]
             self.engine.on_baro(self._on_imu_clock(msg.time_boot_ms * 1e-3), isa_height(msg.press_abs),  # type: ignore[attr-defined]
                                 BARO_SIGMA_M)

@@ -2,8 +2,13 @@
 
 from __future__ import annotations
 
+import math
+import os
+import shutil
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -12,6 +17,11 @@ from mavins import files
 from . import errors
 from .scenarios import Scenario, apply_turntable, build
 from .trajectory import SimResult, simulate
+
+FILE_NAMES = ("imu.csv", "imu_rates.csv", "truth.csv", "init.json")
+
+if TYPE_CHECKING:
+    from .aiding import Aiding
 
 
 @dataclass(frozen=True)
@@ -54,12 +64,13 @@ def generate(
     dur = duration if duration is not None else (scenario.duration or length)
     if dur <= 0:
         raise ValueError(f"duration must be positive, got {dur}")
-    if length < dur:
-        traj.static(dur - length)
-    apply_turntable(scenario, traj, traj.t0 + dur)
     hz = rate if rate is not None else scenario.rate
     if hz <= 0:
         raise ValueError(f"rate must be positive, got {hz}")
+    check_size(scenario, duration=dur, rate=hz)  # before anything is allocated
+    if length < dur:
+        traj.static(dur - length)
+    apply_turntable(scenario, traj, traj.t0 + dur)
     exact = simulate(traj, hz, dur, usec_grid=usec_grid)
     g = grade if grade is not None else scenario.grade
     model = errors.grade(g)
@@ -67,16 +78,72 @@ def generate(
     return SimRun(scenario, hz, g, seed, exact, t, dth, dv, kept)
 
 
-def write(run: SimRun, outdir: Path) -> list[Path]:
-    """Write imu.csv, imu_rates.csv, truth.csv and init.json (CONVENTIONS.md) into outdir."""
-    outdir.mkdir(parents=True, exist_ok=True)
-    imu = outdir / "imu.csv"
-    files.write_table(imu, files.INCREMENT_COLUMNS, np.column_stack([run.t, run.dtheta, run.dv]))
-    w, f = run.rates()
-    rates = outdir / "imu_rates.csv"
-    files.write_table(rates, files.RATE_COLUMNS, np.column_stack([run.t, w, f]))
-    truth = outdir / "truth.csv"
-    files.write_table(truth, SimResult.TRUTH_COLUMNS, run.exact.truth)
-    init = outdir / "init.json"
-    files.write_init(init, run.init())
-    return [imu, rates, truth, init]
+def write(run: SimRun, outdir: Path, aiding: Aiding | None = None) -> list[Path]:
+    """Write imu.csv, imu_rates.csv, truth.csv and init.json (CONVENTIONS.md) into outdir.
+
+    With ``aiding`` (sim.aiding.simulate_aiding) also gnss.csv, baro.csv, mag.csv (those it holds).
+    """
+    # Files are written beside their targets and renamed into place at the end (files.atomic_outputs): an
+    # error, a full disk or Ctrl-C leaves outdir as it was. Too large for the disk: files.ResourceError first.
+    imu, rates, truth, init = (outdir / name for name in FILE_NAMES)
+    files.check_resources(f"the files of {len(run.t):,} samples", disk=len(run.t) * DISK_PER_SAMPLE, disk_at=outdir,
+                          hint=" (shorten --duration or lower --rate)")
+    stage: Path | None = None
+    try:
+        with files.atomic_outputs([imu, rates, truth, init]) as (t_imu, t_rates, t_truth, t_init):
+            try:
+                files.write_table(t_imu, files.INCREMENT_COLUMNS, np.column_stack([run.t, run.dtheta, run.dv]))
+                w, f = run.rates()
+                files.write_table(t_rates, files.RATE_COLUMNS, np.column_stack([run.t, w, f]))
+                files.write_table(t_truth, SimResult.TRUTH_COLUMNS, run.exact.truth)
+                files.write_init(t_init, run.init())
+                if aiding is not None:  # its files go to a hidden folder in outdir, moved in with the others
+                    stage = Path(tempfile.mkdtemp(dir=outdir, prefix=".aiding.", suffix=".tmp"))
+                    staged = [Path(p) for p in aiding.write(stage)]
+            except BaseException:
+                if stage is not None:  # before atomic_outputs removes a folder it made
+                    shutil.rmtree(stage, ignore_errors=True)
+                raise
+        paths = [imu, rates, truth, init]
+        if stage is not None:
+            for p in staged:
+                os.replace(p, outdir / p.name)
+                paths.append(outdir / p.name)
+        return paths
+    finally:
+        if stage is not None:
+            shutil.rmtree(stage, ignore_errors=True)
+
+
+# Sizes of a run, per IMU sample, measured on the built-in scenarios (peak memory of generate() plus
+# write(): about 0.8 kB for static, 1.2 kB for flight; the three CSVs: 450-640 bytes), with a margin.
+MEMORY_PER_SAMPLE = 1600
+DISK_PER_SAMPLE = 700
+
+
+def samples(duration: float, rate: float) -> int:
+    """IMU samples of a run (simulate()'s grid t0 + k/rate, k = 1..n)."""
+    return int(math.floor(duration * rate + 1e-9))
+
+
+def check_size(scenario: Scenario, *, duration: float | None, rate: float | None, outdir: Path | None = None) -> None:
+    """Refuse a run that cannot be held in memory (or, with ``outdir``, written to its disk), with the estimate.
+
+    Raises ValueError for a run of no sample and files.ResourceError for one
+    too large; call it before generate() so nothing is computed in vain.
+    """
+    hz = rate if rate is not None else scenario.rate
+    if duration is None:
+        traj = build(scenario)
+        duration = scenario.duration or (traj.t - traj.t0)
+    dur = duration
+    if not (dur > 0 and hz > 0 and math.isfinite(dur) and math.isfinite(hz)):
+        raise ValueError(f"duration and rate must be positive and finite, got {dur:g} s at {hz:g} Hz")
+    n = samples(dur, hz)
+    if n < 1:
+        raise ValueError(f"{dur:g} s at {hz:g} Hz is less than one IMU sample (lengthen --duration or raise --rate)")
+    what = f"{dur:g} s at {hz:g} Hz ({n:,} samples)"
+    hint = " (shorten --duration or lower --rate)"
+    files.check_resources(what, memory=n * MEMORY_PER_SAMPLE, hint=hint)
+    if outdir is not None:
+        files.check_resources(what, disk=n * DISK_PER_SAMPLE, disk_at=outdir, hint=hint)

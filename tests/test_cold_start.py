@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from support import ENV, MAVINS, free_udp_port, mavins, summary, wait_for_line
+from support import ENV, MAVINS, free_udp_port, mavins, summary, wait_for_line, wait_for_room, wait_until_read
 from mavins.link.mavlink import mavlink
 
 RATE_HZ = 500.0
@@ -75,7 +75,10 @@ def test_cold_start_then_paced_input_loses_nothing(tmp_path: Path) -> None:
                 wait = t0 + i / RATE_HZ - time.monotonic()
                 if wait > 0:
                     time.sleep(wait)
+                if i % 16 == 15:
+                    wait_for_room(port)  # a busy machine slows the sender; the service's socket never overflows
                 sock.sendto(f, ("127.0.0.1", port))
+        wait_until_read(port, svc)  # everything read before the stop (the stop's drain is bounded in time)
         svc.send_signal(signal.SIGTERM)
         svc.wait(120)
     finally:

@@ -58,11 +58,11 @@ from hypothesis import strategies as st
 os.environ.setdefault("MAVLINK20", "1")
 
 from mavins.engine import EngineConfig, State  # noqa: E402
-from mavins.ingest import IngestConfig  # noqa: E402
-from mavins.link import _parser  # noqa: E402
-from mavins.mavlink import mavlink  # noqa: E402
+from mavins.link.ingest import IngestConfig  # noqa: E402
+from mavins.link.links import _parser  # noqa: E402
+from mavins.link.mavlink import mavlink  # noqa: E402
 from mavins.service import BATCH, Service, ServiceConfig, Summary  # noqa: E402
-from mavins.signing import now_timestamp  # noqa: E402
+from mavins.link.signing import now_timestamp  # noqa: E402
 from sim.generate import generate  # noqa: E402
 from sim.scenarios import Scenario  # noqa: E402
 from sim.stream import StreamOptions, frames  # noqa: E402

@@ -36,6 +36,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from support import EVENT_TIMEOUT_S, READY_TIMEOUT_S, wait_until_read
+
 REPO = Path(__file__).resolve().parents[1]
 PX4 = REPO / "data" / "px4-sample"
 MAVINS = [str(Path(sys.executable).parent / "mavins")] if (Path(sys.executable).parent / "mavins").is_file() \
@@ -54,7 +56,7 @@ def free_udp_port() -> int:
         return int(s.getsockname()[1])
 
 
-def wait_for_line(path: Path, text: str, proc: subprocess.Popen, timeout: float = 120.0) -> None:
+def wait_for_line(path: Path, text: str, proc: subprocess.Popen, timeout: float = READY_TIMEOUT_S) -> None:
     """``mavins run`` prints "listening on" once its kernels are loaded (compiled after a core change)."""
     t_end = time.monotonic() + timeout
     while time.monotonic() < t_end:
@@ -66,7 +68,7 @@ def wait_for_line(path: Path, text: str, proc: subprocess.Popen, timeout: float 
     raise AssertionError(f"no {text!r} within {timeout} s:\n{path.read_text()}")
 
 
-def mavins(*args: str, cwd: Path, timeout: float = 120.0) -> subprocess.CompletedProcess:
+def mavins(*args: str, cwd: Path, timeout: float = READY_TIMEOUT_S) -> subprocess.CompletedProcess:
     return subprocess.run([*MAVINS, *args], cwd=cwd, env=ENV, capture_output=True, text=True, timeout=timeout)
 
 
@@ -87,13 +89,13 @@ def live(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, str]:
                                 "-o", str(live_csv), *NAV_OPTIONS], stdout=log, stderr=subprocess.STDOUT, env=ENV,
                                cwd=tmp_path)
     try:
-        wait_for_line(log_path, "listening on", svc)
+        wait_for_line(log_path, "ready: listening on", svc)
         sim = mavins("sim", "flight", "--grade", "consumer", "--seed", "3", "--duration", "40", "--speed", "10",
                      "--stream", f"udpout:127.0.0.1:{port}", cwd=tmp_path)
         assert sim.returncode == 0, sim.stderr
-        time.sleep(1.0)  # let the service finish what is queued
+        wait_until_read(port, svc)  # the service has read everything queued (an event, not a pause)
         svc.send_signal(signal.SIGTERM)
-        svc.wait(20)
+        svc.wait(EVENT_TIMEOUT_S)
     finally:
         if svc.poll() is None:
             svc.kill()

@@ -9,9 +9,16 @@ still earns nothing.
 
 One service runs for the whole module (``long_service``, started first): it
 navigates on a signed stream at real time while the other tests run against
-their own services, and the last test checks it after 90 s: a freshly started
-plain pymavlink peer accepts its frames, whose signing timestamps follow the
-wall clock. Keep the module near 95 s.
+their own services, and the last test checks it after 90 s (longer than the
+one minute a new signed stream may lag the clock): a freshly started plain
+pymavlink peer accepts its frames, whose signing timestamps follow the wall
+clock. Signed streams are encoded once the service is ready, so a slow start
+(kernels compiled on a loaded machine) never makes them stale.
+
+Nothing here asserts how long something took: each wait is for an event (a
+datagram, the service having read its input) with a generous timeout, and
+order is told by the kernel's receive stamps. Timings (peer expiry, memory of
+the peer table) are measured in benchmarks/bench_service.py.
 """
 
 from __future__ import annotations
@@ -34,6 +41,7 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
 
 from sim.generate import generate  # noqa: E402
+from support import recv_stamped, udp_stats, wait_for_room, wait_until, wait_until_read  # noqa: E402
 from test_hardening import (  # noqa: E402
     BOOT_US, ENV, MAVINS, VEH_SYS, Svc, drain, encode, imu_frame, make_key, nav_args, read_nav, scenario,
     send_paced, truth_at, udp_socket, wrap_deg,
@@ -161,31 +169,33 @@ def test_forged_frames_do_not_disturb_the_genuine_sender(tmp_path: Path) -> None
                                       {"kind": "accelerate", "speed": 8.0, "accel": 2.0, "tilt": True},
                                       {"kind": "turn", "angle": 180.0, "rate": 30.0},
                                       {"kind": "cruise", "duration": 2.0}], 100.0), grade="ideal")
-    genuine = ClockSigner(key)
-    forger = ClockSigner(hashlib.sha256(b"not the key").digest(), offset_units=86_400 * UNITS)  # link id 0 too
-    items = encode(run, genuine)
-    n_imu = sum(it.name == "HIGHRES_IMU" for it in items)
-    stream: list[tuple[str, bytes]] = []
-    n_forged = 0
-    for it in items:
-        stream.append(("genuine", it.data))
-        if it.imu >= 0 and it.imu % 20 == 7:
-            t_us = int(round(run.t[it.imu] * 1e6)) + BOOT_US + 1000
-            stream.append(("forged", forger.frame(forger.highres_imu_encode(
-                t_us, 0.0, 0.0, -9.8, 1.0, 0.0, 0.0, 0, 0, 0, 0, 0, 0, 20.0, 0b111111, 0))))
-            n_forged += 1
-            if it.imu % 100 == 7:
-                stream.append(("forged", forger.frame(forger.attitude_encode(t_us // 1000, 0.5, 0.5, 2.0, 0, 0, 0))))
-                n_forged += 1
     nav = tmp_path / "nav.csv"
     g_sock, f_sock = udp_socket(), udp_socket()
     with Svc(tmp_path, *nav_args(5.0, "--gyro-bias", "none", "--signing-key", str(key_path), "-o", str(nav))) as svc:
+        genuine = ClockSigner(key)
+        forger = ClockSigner(hashlib.sha256(b"not the key").digest(), offset_units=86_400 * UNITS)  # link id 0 too
+        items = encode(run, genuine)
+        n_imu = sum(it.name == "HIGHRES_IMU" for it in items)
+        stream: list[tuple[str, bytes]] = []
+        n_forged = 0
+        for it in items:
+            stream.append(("genuine", it.data))
+            if it.imu >= 0 and it.imu % 20 == 7:
+                t_us = int(round(run.t[it.imu] * 1e6)) + BOOT_US + 1000
+                stream.append(("forged", forger.frame(forger.highres_imu_encode(
+                    t_us, 0.0, 0.0, -9.8, 1.0, 0.0, 0.0, 0, 0, 0, 0, 0, 0, 20.0, 0b111111, 0))))
+                n_forged += 1
+                if it.imu % 100 == 7:
+                    stream.append(("forged", forger.frame(forger.attitude_encode(t_us // 1000, 0.5, 0.5, 2.0,
+                                                                                 0, 0, 0))))
+                    n_forged += 1
         wall0 = time.monotonic()
         for k, (who, data) in enumerate(stream):
             (g_sock if who == "genuine" else f_sock).sendto(data, svc.addr)
             if k % 40 == 39:
                 time.sleep(max(0.0, wall0 + k / 1500 - time.monotonic()))
-        time.sleep(1.0)
+                wait_for_room(svc.port)
+        svc.settle()
         rc = svc.stop()
     assert rc == 0, svc.log()
     c = svc.summary()
@@ -207,21 +217,22 @@ def test_replayed_signed_frames_are_rejected(tmp_path: Path) -> None:
     key_path, key = make_key(tmp_path, "replay test")
     run = generate(scenario("rest", [{"kind": "static", "duration": 4.0}], 100.0, roll=3.0, pitch=-2.0, yaw=30.0),
                    grade="ideal")
-    items = encode(run, ClockSigner(key))
-    half = len(items) // 2
     nav = tmp_path / "nav.csv"
     g_sock, a_sock = udp_socket(), udp_socket()
     with Svc(tmp_path, *nav_args(1.0, "--signing-key", str(key_path), "-o", str(nav))) as svc:
+        items = encode(run, ClockSigner(key))
+        half = len(items) // 2
         send_paced(g_sock, svc.addr, items[:half], speed=4.0)
         captured = [it.data for it in items[:half]]
         replays = captured[-150:]  # the latest frames: the newest possible replays
-        for d in replays:  # from an attacker's address
+        for k, d in enumerate(replays):  # from an attacker's address
             a_sock.sendto(d, svc.addr)
+            if k % 16 == 15:
+                wait_for_room(svc.port)
         for d in captured[:50]:  # and the genuine sender's own old frames (e.g. a routing loop)
             g_sock.sendto(d, svc.addr)
-        time.sleep(0.2)
         send_paced(g_sock, svc.addr, items[half:], speed=4.0)
-        time.sleep(1.0)
+        svc.settle()
         rc = svc.stop()
     assert rc == 0
     c = svc.summary()
@@ -245,21 +256,29 @@ def _junk_frames(rng: random.Random) -> list[bytes]:
 UNKNOWN_ID_JUNK = bytes([0xFD, 0, 0, 0, 0, 1, 1, 0xFF, 0xFF, 0xFF, 0x12, 0x34])  # a header of an unknown id
 
 
-def _pester(svc: Svc, senders: dict[str, tuple[socket.socket, list[bytes]]], seconds: float = 3.0) -> dict[str, int]:
-    """Each sender sends its datagrams in turn every 0.2 s; returns how many datagrams each received."""
-    got = {name: 0 for name in senders}
-    t_end = time.monotonic() + seconds
-    k = 0
-    while time.monotonic() < t_end:
+def _pester(svc: Svc, senders: dict[str, tuple[socket.socket, list[bytes]]], rounds: int = 15) -> dict[str, int]:
+    """Each sender sends its datagrams in turn, ``rounds`` times; returns how many datagrams each received.
+
+    The first sender is one the service should answer. Once the service has read
+    every datagram, it must receive two more (stamped after that): whatever the
+    service sends to its peers then goes to every sender it took for a peer.
+    """
+    got: dict[str, list[tuple[float, bytes]]] = {name: [] for name in senders}
+    for k in range(rounds):
         for name, (sock, frames) in senders.items():
             sock.sendto(frames[k % len(frames)], svc.addr)
-            got[name] += len(drain(sock))
-        k += 1
-        time.sleep(0.2)
-    time.sleep(1.5)
+    read_at = svc.settle()
+    heard, (sock0, _) = next(iter(senders.items()))
+
+    def two_more() -> bool:
+        got[heard] += recv_stamped(sock0)
+        return sum(1 for a, _ in got[heard] if a > read_at) >= 2
+
+    wait_until(two_more, f"{heard}: two datagrams sent after the service read everything")
     for name, (sock, _) in senders.items():
-        got[name] += len(drain(sock))
-    return got
+        if name != heard:
+            got[name] += recv_stamped(sock)
+    return {name: len(v) for name, v in got.items()}
 
 
 def test_with_a_key_only_the_key_holder_receives_anything(tmp_path: Path) -> None:
@@ -281,7 +300,7 @@ def test_with_a_key_only_the_key_holder_receives_anything(tmp_path: Path) -> Non
         rc = svc.stop()
     print(f"\ndatagrams received: {got}; summary {svc.summary()}")
     assert rc == 0
-    assert got["genuine"] >= 3, "the key holder hears HEARTBEAT and SYS_STATUS"
+    assert got["genuine"] >= 2, "the key holder hears HEARTBEAT and SYS_STATUS"
     assert got["garbage"] == 0 and got["unsigned"] == 0 and got["wrong key"] == 0
     assert svc.count("rejected_unsigned") > 0 and svc.count("rejected_bad_signature") > 0
 
@@ -299,43 +318,59 @@ def test_without_a_key_garbage_earns_nothing(tmp_path: Path) -> None:
         rc = svc.stop()
     print(f"\ndatagrams received: {got}; summary {svc.summary()}")
     assert rc == 0
-    assert got["valid frames"] >= 3
+    assert got["valid frames"] >= 2
     assert got["garbage"] == 0
     assert got["unknown-id junk"] == 0, "12 bytes shaped like a header of an unknown message id are garbage too"
 
 
 # -- the peer table ------------------------------------------------------------------------------------
 def test_silent_peer_stops_receiving_after_the_timeout(tmp_path: Path) -> None:
+    """A peer that stops talking stops receiving (``--peer-timeout``), a peer that keeps talking keeps
+    receiving, and a peer that talks again receives again. Told by the kernel's receive stamps: the
+    service sends each datagram to its peers one after the other, so once the silent peer is dropped the
+    talker receives datagrams stamped after the silent peer's last one (how soon: bench_service.py)."""
     plain = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
     hb = plain.heartbeat_encode(6, 8, 0, 0, 4).pack(plain)
     silent, talker = udp_socket(), udp_socket()
-    arrivals: dict[str, list[float]] = {"silent": [], "talker": []}
-    with Svc(tmp_path, "--sysid", "1", "--peer-timeout", "2") as svc:
-        t0 = time.monotonic()
-        silent.sendto(hb, svc.addr)
-        next_talk = t0
-        while time.monotonic() - t0 < 5.5:
-            if time.monotonic() >= next_talk:  # the other peer keeps talking, every 0.5 s
-                talker.sendto(hb, svc.addr)
-                next_talk += 0.5
-            for name, s in (("silent", silent), ("talker", talker)):
-                arrivals[name] += [time.monotonic() - t0] * len(drain(s))
-            time.sleep(0.02)
+    got: dict[str, list[float]] = {"silent": [], "talker": []}
+
+    def poll(name: str, sock: socket.socket) -> list[float]:
+        got[name] += [a for a, _ in recv_stamped(sock)]
+        return got[name]
+
+    with Svc(tmp_path, "--sysid", "1", "--peer-timeout", "1") as svc:
+        def silent_is_a_peer() -> list[float]:
+            silent.sendto(hb, svc.addr)  # it talks until it has heard something: then it is surely a peer
+            return poll("silent", silent)
+
+        wait_until(silent_is_a_peer, "the (not yet) silent peer receiving", poll=0.1)
+
+        def dropped() -> bool:
+            talker.sendto(hb, svc.addr)  # the other peer keeps talking
+            poll("talker", talker)
+            last = max(poll("silent", silent))  # read after the talker: every earlier datagram to it is in
+            return sum(1 for a in got["talker"] if a > last) >= 6
+
+        wait_until(dropped, "the silent peer dropped (six datagrams to the talker after its last)", poll=0.1)
+        after = max(got["silent"])
+        n_talker = sum(1 for a in got["talker"] if a > after)
+        heard = len(got["silent"])
+        wait_until(lambda: len(silent_is_a_peer()) > heard, "the silent peer receiving again once it talks", poll=0.1)
         rc = svc.stop()
     assert rc == 0
-    print(f"\nsilent peer received at {np.round(arrivals['silent'], 2)} s; talker {len(arrivals['talker'])} datagrams")
-    # the last send is at most 2 s after the service saw the frame (+ its processing delay, a few ms idle)
-    assert arrivals["silent"] and max(arrivals["silent"]) <= 2.5, "nothing after the 2 s expiry"
-    assert arrivals["talker"] and max(arrivals["talker"]) > 4.5, "a peer that keeps talking keeps receiving"
+    print(f"\nsilent peer: {heard} datagrams, then none while the talker received {n_talker}; "
+          f"{len(got['silent']) - heard} more once it talked again")
+    assert n_talker >= 6
 
 
 def test_peer_table_is_bounded_under_many_source_ports(tmp_path: Path) -> None:
+    """3000 source ports with ``--max-peers 4``: only the 4 newest receive. The newest port's first datagram
+    was sent after the service had taken every frame, so from that stamp on nothing may reach the 4 ports
+    before them (the memory the table takes is measured in bench_service.py)."""
     plain = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
     hb = plain.heartbeat_encode(6, 8, 0, 0, 4).pack(plain)
     n_ports, kept = 3000, 8
-    with Svc(tmp_path, "--sysid", "1", "--max-peers", "4", "--peer-timeout", "60") as svc:
-        time.sleep(0.5)
-        rss0 = svc.rss_kb()
+    with Svc(tmp_path, "--sysid", "1", "--max-peers", "4", "--peer-timeout", "3600") as svc:
         keep: list[socket.socket] = []
         for i in range(n_ports):
             s = udp_socket(1 << 16)
@@ -344,24 +379,33 @@ def test_peer_table_is_bounded_under_many_source_ports(tmp_path: Path) -> None:
                 keep.append(s)
             else:
                 s.close()
-            if i % 200 == 199:
-                time.sleep(0.01)
-        time.sleep(0.2)
-        for s in keep:
-            drain(s)  # whatever came before the last sender was in
-        time.sleep(2.2)
-        got = [len(drain(s)) for s in keep]
-        rss1 = svc.rss_kb()
+            if i % 16 == 15:
+                wait_for_room(svc.port)  # every frame is read: none is lost to a full socket
+        svc.settle()
+        got: list[list[float]] = [[] for _ in keep]
+
+        def newest_hear_twice() -> bool:
+            for g, s in zip(got, keep):
+                g += [a for a, _ in recv_stamped(s)]
+            return all(len(g) >= 2 for g in got[-4:])
+
+        wait_until(newest_hear_twice, "the 4 newest peers receiving")
+        for g, s in zip(got, keep):
+            g += [a for a, _ in recv_stamped(s)]
         rc = svc.stop()
-    print(f"\n{n_ports} source ports; datagrams received by the last {kept}: {got}; RSS {rss0} -> {rss1} kB")
+        summary = svc.summary()
+    first = min(got[-1])  # the newest peer's first datagram: sent when the table was final
+    late = [sum(1 for a in g if a >= first) for g in got[:-4]]
+    print(f"\n{n_ports} source ports; datagrams received by the last {kept}: {[len(g) for g in got]}; "
+          f"by the 4 older ones after the table was final: {late}")
     assert rc == 0
-    assert all(n == 0 for n in got[:-4]) and all(n >= 2 for n in got[-4:]), "only the 4 newest peers receive"
-    assert rss0 is not None and rss1 is not None and rss1 - rss0 < 5 * 1024
+    assert int(summary.get("kernel_dropped", 0)) == 0 and int(summary.get("messages received", 0)) == n_ports
+    assert all(len(g) >= 2 for g in got[-4:]) and late == [0] * (kept - 4), "only the 4 newest peers receive"
 
 
 # -- keys ----------------------------------------------------------------------------------------------
 def test_key_files(tmp_path: Path) -> None:
-    from mavins.signing import load_key
+    from mavins.link.signing import load_key
 
     # mavins key FILE --passphrase P: mode 600, 64 hex digits, SHA-256(P) (MAVProxy's 'signing setup P')
     key_path, key = make_key(tmp_path, "MAVProxy passphrase")
@@ -402,9 +446,6 @@ def test_commands_and_setup_signing_are_ignored(tmp_path: Path) -> None:
     new_key = hashlib.sha256(b"the attacker's key").digest()
     run = generate(scenario("rest", [{"kind": "static", "duration": 4.0}], 100.0, roll=3.0, pitch=-2.0, yaw=30.0),
                    grade="ideal")
-    genuine = ClockSigner(key)
-    items = encode(run, genuine)
-    half = len(items) // 2
     gcs = ClockSigner(key, sysid=255, compid=190)
     plain = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
     commands = [gcs.command_long_encode(VEH_SYS, 191, cmd, 0, 0, 0, 0, 0, 0, 0, 0) for cmd in (
@@ -417,16 +458,18 @@ def test_commands_and_setup_signing_are_ignored(tmp_path: Path) -> None:
     g_sock = udp_socket()
     nav = tmp_path / "nav.csv"
     with Svc(tmp_path, *nav_args(1.0, "--signing-key", str(key_path), "-o", str(nav))) as svc:
+        items = encode(run, ClockSigner(key))  # signed now: a new stream must be less than a minute old
+        half = len(items) // 2
         send_paced(g_sock, svc.addr, items[:half], speed=4.0)
         for m in commands:
             g_sock.sendto(gcs.frame(m), svc.addr)
             g_sock.sendto(m.pack(plain), svc.addr)  # the same, unsigned
         g_sock.sendto(gcs.frame(setup), svc.addr)
-        time.sleep(0.3)
+        svc.settle()  # SETUP_SIGNING taken (and ignored) before anything signed with its key arrives
         for _ in range(5):
             g_sock.sendto(new_signer.frame(plain.heartbeat_encode(6, 8, 0, 0, 4)), svc.addr)
         send_paced(g_sock, svc.addr, items[half:], speed=4.0)
-        time.sleep(1.0)
+        svc.settle()
         rc = svc.stop()
     assert rc == 0
     got, bad = verify(key, drain(g_sock))
@@ -461,7 +504,6 @@ def test_through_mavproxy_with_signing_key_passphrase(tmp_path: Path) -> None:
     key_path, key = make_key(tmp_path, passphrase)
     run = generate(scenario("rest", [{"kind": "static", "duration": 4.0}], 100.0, roll=3.0, pitch=-2.0, yaw=30.0),
                    grade="ideal")
-    items = encode(run, ClockSigner(key))
     a = free_udp_port()
     nav = tmp_path / "nav.csv"
     with Svc(tmp_path, *nav_args(1.0, "--signing-key", str(key_path), "-o", str(nav))) as svc:
@@ -473,15 +515,17 @@ def test_through_mavproxy_with_signing_key_passphrase(tmp_path: Path) -> None:
                 stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=ENV, cwd=tmp_path,
                 start_new_session=True)
         try:
-            t_end = time.monotonic() + 30.0
-            while "Setup signing key" not in (tmp_path / "mavproxy.log").read_text() and time.monotonic() < t_end:
-                time.sleep(0.1)
-            time.sleep(1.0)  # MAVProxy opens its master socket after its start-up
+            wait_until(lambda: "Setup signing key" in (tmp_path / "mavproxy.log").read_text(), "MAVProxy keyed")
+            wait_until(lambda: udp_stats(a) is not None, "MAVProxy listening")  # it opens its master socket late
+            items = encode(run, ClockSigner(key))  # signed now: a new stream must be less than a minute old
             sock = udp_socket()
             send_paced(sock, ("127.0.0.1", a), items, speed=2.0)
-            time.sleep(1.5)
-            back = drain(sock)
+            wait_until_read(a)
+            svc.settle()
+            back: list[bytes] = []
+            wait_until(lambda: back.extend(drain(sock)) or any(verify(key, back)[0]), "the solution back through MAVProxy")
             rc = svc.stop()
+            back += drain(sock)
         finally:
             if mp.poll() is None:
                 os.killpg(mp.pid, signal.SIGTERM)
@@ -520,26 +564,34 @@ def test_after_90_s_a_fresh_pymavlink_peer_accepts_the_service(long_service: Lon
     peer.signing.timestamp = now_units()
     peer.robust_parsing = True
     sock = udp_socket()
+    hello = time.time()
     sock.sendto(peer.heartbeat_encode(6, 8, 0, 0, 4).pack(peer), lr.svc.addr)  # signed: earns output
-    received: list[tuple[float, bytes]] = []
-    t_end = time.monotonic() + 2.0
-    while time.monotonic() < t_end:
-        received += [(time.time(), d) for d in drain(sock)]
-        time.sleep(0.02)
+    received: list[tuple[float, bytes]] = []  # (kernel arrival, datagram)
+
+    def fifty() -> bool:
+        received.extend(recv_stamped(sock))
+        return len(received) >= 50
+
+    wait_until(fifty, "50 frames to a fresh peer")
     good = bad = 0
-    skew = []
+    after_hello, before_arrival = [], []
     for arrival, d in received:
         for m in peer.parse_buffer(d) or []:  # check_signature: a new stream must be within 1 min of our clock
             if m.get_type() == "BAD_DATA":
                 bad += 1
             else:
                 good += 1
-                skew.append(timestamp_of(d) / UNITS - (arrival - EPOCH_2015))
+        ts = EPOCH_2015 + timestamp_of(d) / UNITS
+        after_hello.append(ts - hello)
+        before_arrival.append(arrival - ts)
     ran = time.monotonic() - lr.t_start
     print(f"\nafter {ran:.0f} s of service ({lr.sent} signed frames in): fresh peer accepted {good} frames, refused "
-          f"{bad}; signing timestamp - wall clock: {min(skew):+.3f} .. {max(skew):+.3f} s")
-    assert good >= 50 and bad == 0
-    assert max(abs(s) for s in skew) < 2.0
+          f"{bad}; signing timestamp - our frame's time {min(after_hello):+.4f} s .., arrival - signing timestamp "
+          f"{min(before_arrival):+.4f} s ..")
+    assert good == len(received) and bad == 0
+    # on the clock: every frame was signed after our frame (it made us a peer) and before it arrived
+    # (10 ms allow for the 10 us steps a timestamp may run ahead within a burst of frames)
+    assert min(after_hello) > -0.01 and min(before_arrival) > -0.01
     # timestamps are reserved ahead in KEY.timestamp (mode 600): after a restart none is used again
     last_used = max(timestamp_of(d) for _, d in received)
     lr.stop.set()
@@ -558,8 +610,9 @@ def test_after_90_s_a_fresh_pymavlink_peer_accepts_the_service(long_service: Lon
         attacker = udp_socket()
         for d in lr.captured:
             attacker.sendto(d, again.addr)
-        time.sleep(2.5)
-        first = drain(sock2)
+        first: list[bytes] = []
+        wait_until(lambda: first.extend(drain(sock2)) or first, "output to the signed peer of the restarted service")
+        again.settle()
         rc = again.stop()
     assert rc == 0
     assert first and min(timestamp_of(d) for d in first) > reserved, "no timestamp of the last run is reused"

@@ -10,6 +10,12 @@
   simulator sends (HIGHRES_IMU + SIM_STATE truth + ATTITUDE + GPS ...) and
   every datagram the service sends back to it (the service answers the peers of
   its listening link, which is what an autopilot on that link would receive).
+* Nothing depends on the machine's speed: the test's sockets have room for the
+  whole run, the relay forwards with backpressure, the run ends on events (the
+  service has read everything, then a HEARTBEAT sent after that has arrived),
+  and every count is exact or bounded by a loss the kernel counted (its drop
+  counters of each socket). HEARTBEAT's 1 Hz of wall time and the ingest rate
+  are measured in benchmarks/bench_service.py.
 * The truth is the simulator's SIM_STATE, sent straight after the HIGHRES_IMU of
   the same instant at 50 Hz; SIM_STATE has no time field, so it is paired with
   the ``time_usec`` of the HIGHRES_IMU before it. Positions use SIM_STATE's
@@ -35,9 +41,9 @@ docs/service.md). Position and velocity limits are what an attitude error at
 that limit can do over the flight (``test_position_and_velocity_against_truth``),
 not tuned to the measured values.
 
-The run takes ~25-30 s of wall time (the simulator generates the 126 s flight
-first, ~15 s on a busy 2-core machine, then streams it at x15); the whole file
-~40 s. Keep it well under 60 s.
+The run takes ~25-30 s of wall time on an idle machine (the simulator
+generates the 126 s flight first, ~15 s on a busy 2-core machine, then streams
+it at x15); the whole file ~40 s.
 """
 
 from __future__ import annotations
@@ -52,7 +58,6 @@ import socket
 import subprocess
 import sys
 import threading
-import time
 from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -63,6 +68,11 @@ import pytest
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
+
+from support import (  # noqa: E402
+    EVENT_TIMEOUT_S, READY_TIMEOUT_S, kernel_drops, recv_stamped, roomy, summary, wait_for_line, wait_for_room,
+    wait_until, wait_until_read,
+)
 
 # -- the scenario and what is derived from it --------------------------------
 SCENARIO = "flight"
@@ -99,20 +109,23 @@ class Tee:
     """UDP relay 127.0.0.1:listen -> 127.0.0.1:forward that records both directions.
 
     ``upstream`` holds what the simulator sent (in order), ``downstream`` what
-    came back from the service to the relay's forwarding socket.
+    came back from the service to the relay's forwarding socket, with kernel
+    receive stamps. Its sockets have room for minutes of traffic and it forwards
+    with backpressure, so the relay itself loses nothing however busy the
+    machine is; the kernel's drop counts of its sockets say so (``drops``).
     """
 
     def __init__(self, forward_port: int) -> None:
-        self.rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.rx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
+        self.rx = roomy(socket.socket(socket.AF_INET, socket.SOCK_DGRAM))
         self.rx.bind(("127.0.0.1", 0))
         self.port = self.rx.getsockname()[1]
-        self.tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.tx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
+        self.tx = roomy(socket.socket(socket.AF_INET, socket.SOCK_DGRAM))
         self.tx.bind(("127.0.0.1", 0))
+        self.tx_port = self.tx.getsockname()[1]
         self.dest = ("127.0.0.1", forward_port)
         self.upstream: list[bytes] = []
-        self.downstream: list[bytes] = []
+        self.downstream: list[tuple[float, bytes]] = []
+        self.forwarded = 0
         self.errors = 0
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
@@ -121,20 +134,27 @@ class Tee:
     def _run(self) -> None:
         while not self._stop.is_set():
             ready, _, _ = select.select([self.rx, self.tx], [], [], 0.05)
-            for s in ready:
-                try:
-                    data, _ = s.recvfrom(65535)
-                except OSError:
-                    self.errors += 1
-                    continue
-                if s is self.rx:
+            if self.tx in ready:
+                self.downstream += recv_stamped(self.tx)
+            if self.rx in ready:
+                for _, data in recv_stamped(self.rx):
                     self.upstream.append(data)
+                    if self.forwarded % 16 == 15:
+                        wait_for_room(self.dest[1])
                     try:
                         self.tx.sendto(data, self.dest)
+                        self.forwarded += 1
                     except OSError:
                         self.errors += 1
-                else:
-                    self.downstream.append(data)
+
+    def settle(self) -> None:
+        """Wait until everything sent to the relay has been read and forwarded."""
+        wait_until_read(self.port)
+        wait_until(lambda: self.forwarded + self.errors == len(self.upstream), "the tee forwarding")
+
+    def drops(self) -> tuple[int, int]:
+        """Datagrams the kernel dropped at the relay: (from the simulator, from the service)."""
+        return kernel_drops(self.port), kernel_drops(self.tx_port)
 
     def close(self) -> None:
         self._stop.set()
@@ -144,37 +164,41 @@ class Tee:
 
 
 class Client:
-    """A plain pymavlink client listening on 127.0.0.1:port (the service's --out)."""
+    """A plain pymavlink client (parser) on 127.0.0.1:port, the service's --out; kernel receive stamps kept."""
 
     def __init__(self) -> None:
-        self.port = free_udp_port()
-        self.conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{self.port}", dialect="common")
-        self.conn.port.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
+        self.sock = roomy(socket.socket(socket.AF_INET, socket.SOCK_DGRAM))
+        self.sock.bind(("127.0.0.1", 0))
+        self.port = self.sock.getsockname()[1]
         self.msgs: list[mavlink.MAVLink_message] = []
-        self.arrival: list[float] = []  # wall time (monotonic) of each message
-        self.last_rx = time.monotonic()
+        self.arrival: list[float] = []  # kernel receive time (time.time() scale) of each message
+        self._parser = mavlink.MAVLink(None)
+        self._parser.robust_parsing = True
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
         self._thread.start()
 
     def _run(self) -> None:
         while not self._stop.is_set():
-            m = self.conn.recv_match(blocking=True, timeout=0.05)
-            if m is not None and m.get_type() != "BAD_DATA":
-                self.last_rx = time.monotonic()
-                self.msgs.append(m)
-                self.arrival.append(self.last_rx)
+            if not select.select([self.sock], [], [], 0.05)[0]:
+                continue
+            for stamp, data in recv_stamped(self.sock):
+                for m in self._parser.parse_buffer(data) or []:
+                    if m.get_type() != "BAD_DATA":
+                        self.msgs.append(m)
+                        self.arrival.append(stamp)
 
-    def wait_quiet(self, quiet: float = 0.7, timeout: float = 20.0) -> None:
-        """Return once nothing has arrived for ``quiet`` seconds (the service caught up)."""
-        t_end = time.monotonic() + timeout
-        while time.monotonic() < t_end and time.monotonic() - self.last_rx < quiet:
-            time.sleep(0.05)
+    def heard_after(self, t: float, name: str = "HEARTBEAT") -> list[mavlink.MAVLink_message]:
+        """Messages of a type that arrived after wall time ``t`` (sent after it: loopback delivers at once)."""
+        return [m for a, m in zip(list(self.arrival), list(self.msgs)) if a > t and m.get_type() == name]
+
+    def drops(self) -> int:
+        return kernel_drops(self.port)
 
     def close(self) -> None:
         self._stop.set()
         self._thread.join(2.0)
-        self.conn.close()
+        self.sock.close()
 
 
 def parse(datagrams: list[bytes]) -> list[mavlink.MAVLink_message]:
@@ -261,20 +285,7 @@ def dcm(q: np.ndarray) -> np.ndarray:
                      [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
 
 
-def wait_for_line(path: Path, text: str, proc: subprocess.Popen, timeout: float = 120.0) -> None:
-    """Wait for ``text`` in a process's log. ``mavins run`` prints "listening on" after loading its kernels
-    (compiling them, the first time after a change to mavins/core: up to a minute on a busy machine)."""
-    t_end = time.monotonic() + timeout
-    while time.monotonic() < t_end:
-        if path.exists() and text in path.read_text(errors="replace"):
-            return
-        if proc.poll() is not None:
-            raise AssertionError(f"{proc.args} exited ({proc.returncode}) before {text!r}:\n{path.read_text()}")
-        time.sleep(0.05)
-    raise AssertionError(f"no {text!r} from {proc.args} within {timeout} s:\n{path.read_text()}")
-
-
-def stop_process(proc: subprocess.Popen, sig: int = signal.SIGINT, timeout: float = 10.0) -> None:
+def stop_process(proc: subprocess.Popen, sig: int = signal.SIGINT, timeout: float = EVENT_TIMEOUT_S) -> None:
     if proc.poll() is None:
         proc.send_signal(sig)
         try:
@@ -290,17 +301,60 @@ def sim_command(port: int, *extra: str, scenario: str = SCENARIO, duration: floa
             "--sysid", str(SIM_SYSID), "--stream", f"udpout:127.0.0.1:{port}", *extra]
 
 
+def quiesce(tee: Tee, svc_port: int, client: Client, proc: subprocess.Popen | None = None) -> None:
+    """After the simulator has finished: wait (events, not pauses) until the relay has forwarded everything,
+    the service has read everything, and a HEARTBEAT sent after that has reached the client and the relay:
+    every output of every input was sent before it, so both hold the whole run."""
+    tee.settle()
+    read_at = wait_until_read(svc_port, proc)
+    wait_until(lambda: client.heard_after(read_at), "a HEARTBEAT to the --out client after the last input")
+    wait_until(lambda: [1 for a, d in list(tee.downstream) if a > read_at and d[7:10] == b"\0\0\0"],
+               "a HEARTBEAT (message id 0) back to the master peer after the last input")
+
+
+SET = ("ATTITUDE", "ATTITUDE_QUATERNION", "LOCAL_POSITION_NED", "GLOBAL_POSITION_INT", "ODOMETRY")  # one output set
+
+
 @dataclass
 class Run:
-    """Everything one end-to-end run saw."""
+    """Everything one end-to-end run saw, and what each hop lost (the kernel's drop counts)."""
 
     truth: Truth
     published: dict[str, list[mavlink.MAVLink_message]]  # what the --out client received
     downstream: dict[str, list[mavlink.MAVLink_message]]  # what came back to the tee (master peer)
     service_log: str
     returncode: int | None
-    nav_csv: Path | None
-    heartbeat_arrivals: list[float]
+    nav: np.ndarray  # the solution file: every output set the service made (never lost on the way)
+    tee_drops: tuple[int, int]  # kernel drops at the relay (upstream, downstream); normally 0
+    client_drops: int  # kernel drops at the --out client; normally 0
+    service_drops: int  # kernel drops at the service's socket (/proc/net/udp); normally 0
+
+    @property
+    def counters(self) -> dict[str, str]:
+        return summary(self.service_log)
+
+    @property
+    def input_complete(self) -> bool:
+        """The service navigated every sample the simulator sent (nothing dropped on the way or shed)."""
+        return self.tee_drops[0] == 0 and int(self.counters.get("flood_dropped", 0)) == 0
+
+    @property
+    def received_all(self) -> bool:
+        """The --out client received every datagram the service sent it (the kernel dropped none)."""
+        return self.client_drops == 0
+
+    @property
+    def nav_ms(self) -> np.ndarray:
+        return np.round(self.nav[:, 0] * 1e6).astype(np.int64) // 1000
+
+    def sets(self, source: str = "published") -> list[dict[str, mavlink.MAVLink_message]]:
+        """Output sets as received, grouped by their sensor time; only sets of which every message arrived."""
+        got: dict[int, dict[str, mavlink.MAVLink_message]] = defaultdict(dict)
+        for name, msgs in getattr(self, source).items():
+            if name in SET:
+                for m in msgs:
+                    got[m.time_usec // 1000 if name == "ODOMETRY" else m.time_boot_ms][name] = m
+        return [got[k] for k in sorted(got) if len(got[k]) == len(SET)]
 
 
 # -- the main run: `mavins run` as a real subprocess ---------------------------
@@ -321,10 +375,12 @@ def flight_run(tmp_path_factory: pytest.TempPathFactory) -> Run:
                  "--heading", "vehicle", "--gyro-bias", "none", "--align", str(ALIGN_S),
                  "--geoid-height", str(GEOID_M), "--rate", str(OUT_RATE), "-o", str(nav_csv)],
                 stdout=log, stderr=subprocess.STDOUT, env=ENV, cwd=tmp)
-        wait_for_line(log_path, "listening on", svc)
-        sim = subprocess.run(sim_command(tee.port), env=ENV, cwd=tmp, capture_output=True, text=True, timeout=90)
+        wait_for_line(log_path, "ready: listening on", svc)
+        sim = subprocess.run(sim_command(tee.port), env=ENV, cwd=tmp, capture_output=True, text=True,
+                             timeout=READY_TIMEOUT_S)
         assert sim.returncode == 0, sim.stderr
-        client.wait_quiet()
+        quiesce(tee, svc_port, client, svc)
+        drops = tee.drops(), client.drops(), kernel_drops(svc_port)
         stop_process(svc)
         rc = svc.returncode
     finally:
@@ -333,26 +389,37 @@ def flight_run(tmp_path_factory: pytest.TempPathFactory) -> Run:
             svc.wait(5)
         tee.close()
         client.close()
-    hb_times = [t for t, m in zip(client.arrival, client.msgs) if m.get_type() == "HEARTBEAT"]
-    return Run(truth_from(tee.upstream), by_type(client.msgs), by_type(parse(tee.downstream)),
-               log_path.read_text(errors="replace"), rc, nav_csv, hb_times)
+    return Run(truth_from(tee.upstream), by_type(client.msgs), by_type(parse([d for _, d in tee.downstream])),
+               log_path.read_text(errors="replace"), rc, np.loadtxt(nav_csv, delimiter=",", skiprows=1, ndmin=2),
+               *drops)
 
 
 def test_service_exits_cleanly_and_took_every_sample(flight_run: Run) -> None:
+    """Every sample the simulator sent is navigated, or counted where it was lost: by the kernel at the
+    relay (its drop count), or by the service (``flood_dropped``, whose kernel part is the kernel's own
+    count for the service's socket). On a machine of any speed this is exact."""
     log = flight_run.service_log
     assert flight_run.returncode == 0, log
     assert "Traceback" not in log, log
-    n_imu = len(flight_run.truth.imu_usec)
-    assert n_imu == int(round(DURATION_S * IMU_RATE)), "the tee saw the whole stream"
-    # the service accepted every IMU sample the simulator sent (no loss on the way)
-    assert f"imu_accepted: {n_imu}" in log, log
     assert "final state: NAVIGATING" in log, log
+    c = flight_run.counters
+    sent = int(round(DURATION_S * IMU_RATE))  # the simulator: DURATION_S of the scenario at IMU_RATE
+    relayed = len(flight_run.truth.imu_usec)
+    accepted, dropped = int(c["imu_accepted"]), int(c.get("flood_dropped", 0))
+    print(f"\nIMU sent {sent}, relayed {relayed} (relay drops {flight_run.tee_drops[0]}), accepted {accepted}, "
+          f"flood_dropped {dropped}, kernel_dropped {c.get('kernel_dropped')} (/proc: {flight_run.service_drops})")
+    assert relayed <= sent and sent - relayed <= flight_run.tee_drops[0], "the relay lost nothing uncounted"
+    assert int(c.get("kernel_dropped", 0)) == flight_run.service_drops
+    assert accepted <= relayed and relayed - accepted <= dropped, "every sample taken or counted as dropped"
 
 
 def test_attitude_within_limit_after_two_minute_flight(flight_run: Run) -> None:
     truth, pub = flight_run.truth, flight_run.published
     aq = pub["ATTITUDE_QUATERNION"]
-    assert len(aq) >= FLIGHT_S * OUT_RATE, f"{len(aq)} ATTITUDE_QUATERNION received"
+    if flight_run.input_complete:  # every sample navigated: a set per 20 ms of the two minutes
+        assert len(flight_run.nav) >= FLIGHT_S * OUT_RATE, f"{len(flight_run.nav)} output sets"
+    if flight_run.received_all:
+        assert len(aq) == len(flight_run.nav), f"{len(aq)} ATTITUDE_QUATERNION received"
     pairs = at_truth(aq, truth)
     # outputs come at the first attitude update (every 2 samples = 8 ms) at or after each multiple of 20 ms,
     # SIM_STATE at multiples of 20 ms: every other output set falls on a truth instant
@@ -380,7 +447,8 @@ def test_attitude_within_limit_after_two_minute_flight(flight_run: Run) -> None:
 def test_position_and_velocity_against_truth(flight_run: Run) -> None:
     truth, pub = flight_run.truth, flight_run.published
     lp = at_truth(pub["LOCAL_POSITION_NED"], truth)
-    assert len(lp) >= 0.45 * FLIGHT_S * OUT_RATE
+    assert len(lp) >= 0.45 * FLIGHT_S * OUT_RATE or not (flight_run.input_complete and flight_run.received_all)
+    assert len(lp) > 0
     est = np.array([[m.x, m.y, m.z] for m, _ in lp])
     vel = np.array([[m.vx, m.vy, m.vz] for m, _ in lp])
     # truth position in the local NED frame whose origin is the initial position (--lat/--lon/--alt)
@@ -410,9 +478,10 @@ def test_identity_heartbeat_and_stamps(flight_run: Run) -> None:
     # every message comes from the vehicle's system id, component 191 (onboard computer)
     assert {(m.get_srcSystem(), m.get_srcComponent()) for m in ours} == {(SIM_SYSID, 191)}
     assert flight_run.truth.sysids == {SIM_SYSID}
+    # HEARTBEAT: an onboard controller, no autopilot, ACTIVE once navigating (the run ended on such a
+    # HEARTBEAT, sent after the last input; its 1 Hz of wall time is measured in bench_service.py)
     hb = pub["HEARTBEAT"]
-    gaps = np.diff(flight_run.heartbeat_arrivals)
-    assert len(hb) >= 5 and 0.8 < float(np.median(gaps)) < 1.3, f"HEARTBEAT at 1 Hz of wall time: {gaps}"
+    assert hb
     for m in hb:
         assert m.type == mavlink.MAV_TYPE_ONBOARD_CONTROLLER
         assert m.autopilot == mavlink.MAV_AUTOPILOT_INVALID
@@ -421,31 +490,42 @@ def test_identity_heartbeat_and_stamps(flight_run: Run) -> None:
     # stamps: every message of one output set carries the same sensor time, time_boot_ms = time_usec // 1000,
     # and that time is the time_usec of one of the simulator's IMU samples (the sample that completed the set)
     imu = set(flight_run.truth.imu_usec)
-    odo = pub["ODOMETRY"]
-    assert len(odo) == len(pub["ATTITUDE"]) == len(pub["ATTITUDE_QUATERNION"]) == len(pub["LOCAL_POSITION_NED"]) \
-        == len(pub["GLOBAL_POSITION_INT"])
-    for a, q, lp, gp, o in zip(pub["ATTITUDE"], pub["ATTITUDE_QUATERNION"], pub["LOCAL_POSITION_NED"],
-                               pub["GLOBAL_POSITION_INT"], odo):
+    sets = flight_run.sets()
+    for st in sets:
+        o = st["ODOMETRY"]
         assert o.time_usec in imu
-        assert a.time_boot_ms == q.time_boot_ms == lp.time_boot_ms == gp.time_boot_ms == o.time_usec // 1000
+        assert {st[n].time_boot_ms for n in SET if n != "ODOMETRY"} == {o.time_usec // 1000}
+    received = {n: [m.time_usec // 1000 if n == "ODOMETRY" else m.time_boot_ms for m in pub[n]] for n in SET}
+    nav_ms = list(flight_run.nav_ms)
+    for n in SET:  # what arrived is what the solution file holds, in order (all of it, if nothing was lost)
+        assert set(received[n]) <= set(nav_ms) and received[n] == sorted(received[n]), n
+        if flight_run.received_all:
+            assert received[n] == nav_ms, n
     # output in sensor time at --rate: one set each time sensor time crosses a multiple of 20 ms,
-    # none skipped, none twice
-    k = np.array([o.time_usec for o in odo]) // int(1e6 / OUT_RATE)
-    assert np.all(np.diff(k) == 1)
+    # never two in one period; none skipped while every sample was navigated
+    k = np.round(flight_run.nav[:, 0] * 1e6).astype(np.int64) // int(1e6 / OUT_RATE)
+    assert np.all(np.diff(k) >= 1)
+    if flight_run.input_complete:
+        assert np.all(np.diff(k) == 1)
 
 
 def test_odometry_frames_and_consistency(flight_run: Run) -> None:
-    pub = flight_run.published
-    for o, lp, q in zip(pub["ODOMETRY"], pub["LOCAL_POSITION_NED"], pub["ATTITUDE_QUATERNION"]):
+    sets = flight_run.sets()
+    assert sets
+    for o, lp, q in ((st["ODOMETRY"], st["LOCAL_POSITION_NED"], st["ATTITUDE_QUATERNION"]) for st in sets):
         assert o.frame_id == mavlink.MAV_FRAME_LOCAL_FRD
         assert o.child_frame_id == mavlink.MAV_FRAME_BODY_FRD
-        assert o.estimator_type == mavlink.MAV_ESTIMATOR_TYPE_UNKNOWN
+        assert o.estimator_type == mavlink.MAV_ESTIMATOR_TYPE_VIO  # docs/conventions.md: PX4 routes VIO to EKF2
         assert (o.x, o.y, o.z) == (lp.x, lp.y, lp.z)  # pose in the local NED frame of LOCAL_POSITION_NED
         assert list(o.q) == [q.q1, q.q2, q.q3, q.q4]
         assert (o.rollspeed, o.pitchspeed, o.yawspeed) == (q.rollspeed, q.pitchspeed, q.yawspeed)
-        assert math.isnan(o.pose_covariance[0]) and math.isnan(o.velocity_covariance[0])  # unknown
+        # covariances from the filter: finite and positive on the diagonal (docs/conventions.md)
+        diag = (0, 6, 11, 15, 18, 20)
+        assert all(o.pose_covariance[i] > 0 and math.isfinite(o.pose_covariance[i]) for i in diag)
+        assert all(o.velocity_covariance[i] > 0 and math.isfinite(o.velocity_covariance[i]) for i in diag)
+        assert 1 <= o.quality <= 100
     # twist in the child frame (body FRD): v_b = C(q)^T v_n
-    for o, lp in list(zip(pub["ODOMETRY"], pub["LOCAL_POSITION_NED"]))[::50]:
+    for o, lp in [(st["ODOMETRY"], st["LOCAL_POSITION_NED"]) for st in sets][::50]:
         v_b = dcm(np.array(o.q)).T @ np.array([lp.vx, lp.vy, lp.vz])
         assert np.allclose([o.vx, o.vy, o.vz], v_b, atol=1e-4)
 
@@ -453,7 +533,8 @@ def test_odometry_frames_and_consistency(flight_run: Run) -> None:
 def test_global_position_alt_is_amsl_and_matches_local(flight_run: Run) -> None:
     pub, truth = flight_run.published, flight_run.truth
     gp = at_truth(pub["GLOBAL_POSITION_INT"], truth)
-    assert len(gp) >= 0.45 * FLIGHT_S * OUT_RATE
+    assert len(gp) >= 0.45 * FLIGHT_S * OUT_RATE or not (flight_run.input_complete and flight_run.received_all)
+    assert len(gp) > 0
     alt_err = [abs(m.alt / 1000.0 - (s.alt - GEOID_M)) for m, s in gp]  # truth alt is ellipsoidal
     rel_err = [abs(m.relative_alt / 1000.0 - (s.alt - START[2])) for m, s in gp]
     assert max(alt_err) < 0.05 and max(rel_err) < 0.05
@@ -462,11 +543,12 @@ def test_global_position_alt_is_amsl_and_matches_local(flight_run: Run) -> None:
     assert m0.alt == round((START[2] - GEOID_M) * 1000) and abs(m0.relative_alt) <= 1
     assert abs(m0.lat - round(START[0] * 1e7)) <= 1 and abs(m0.lon - round(START[1] * 1e7)) <= 1
     # lat/lon/alt and LOCAL_POSITION_NED describe the same point
-    for m, lp in list(zip(pub["GLOBAL_POSITION_INT"], pub["LOCAL_POSITION_NED"]))[::100]:
+    sets = flight_run.sets()
+    for m, lp in [(st["GLOBAL_POSITION_INT"], st["LOCAL_POSITION_NED"]) for st in sets][::100]:
         ned = ned_from(m.lat * 1e-7, m.lon * 1e-7, m.alt / 1000.0 + GEOID_M, START)
         assert np.allclose(ned, [lp.x, lp.y, lp.z], atol=0.02)
     # hdg: the yaw of the same set in centidegrees, 0..35999
-    for m, a in list(zip(pub["GLOBAL_POSITION_INT"], pub["ATTITUDE"]))[::25]:
+    for m, a in [(st["GLOBAL_POSITION_INT"], st["ATTITUDE"]) for st in sets][::25]:
         assert abs((m.hdg - math.degrees(a.yaw) * 100 + 18000) % 36000 - 18000) <= 1
 
 
@@ -499,13 +581,15 @@ def test_statustext_announces_the_states(flight_run: Run) -> None:
 
 
 def test_solution_file_matches_what_was_published(flight_run: Run) -> None:
-    nav = np.loadtxt(flight_run.nav_csv, delimiter=",", skiprows=1)
+    nav = flight_run.nav
     att = flight_run.published["ATTITUDE"]
-    assert len(nav) == len(att)
-    ms = (np.round(nav[:, 0] * 1e6).astype(np.int64)) // 1000
-    assert list(ms) == [m.time_boot_ms for m in att]
+    if flight_run.received_all:
+        assert len(nav) == len(att)
+    row = {int(ms): i for i, ms in enumerate(flight_run.nav_ms)}
+    assert att and all(m.time_boot_ms in row for m in att)
+    rows = nav[[row[m.time_boot_ms] for m in att]]
     got = np.array([[m.roll, m.pitch, m.yaw] for m in att])
-    assert np.allclose(np.radians(nav[:, 7:10]), got, atol=1e-6)  # float32 on the wire
+    assert np.allclose(np.radians(rows[:, 7:10]), got, atol=1e-6)  # float32 on the wire
 
 
 def test_master_peer_receives_the_solution(flight_run: Run) -> None:
@@ -513,7 +597,10 @@ def test_master_peer_receives_the_solution(flight_run: Run) -> None:
     down = flight_run.downstream
     for name in ("HEARTBEAT", "ATTITUDE", "ODOMETRY", "GLOBAL_POSITION_INT"):
         assert down[name], f"no {name} back on the master link"
-    assert len(down["ODOMETRY"]) == len(flight_run.published["ODOMETRY"])
+    odo = [m.time_usec // 1000 for m in down["ODOMETRY"]]
+    assert set(odo) <= set(flight_run.nav_ms)
+    if flight_run.tee_drops[1] == 0:  # the relay's socket dropped nothing: every set came back
+        assert odo == list(flight_run.nav_ms)
 
 
 # -- in-process service: WAITING for a position, origin = first GPS fix --------
@@ -535,7 +622,7 @@ def _serve_in_thread(svc) -> tuple[threading.Event, threading.Thread, list[BaseE
 def test_in_process_service_waits_for_gps_and_takes_its_origin() -> None:
     """No --lat/--lon/--alt: WAITING until the vehicle's GPS_RAW_INT, then the origin is that fix."""
     from mavins.engine import EngineConfig
-    from mavins.ingest import IngestConfig
+    from mavins.link.ingest import IngestConfig
     from mavins.service import Service, ServiceConfig
 
     svc_port = free_udp_port()
@@ -547,12 +634,12 @@ def test_in_process_service_waits_for_gps_and_takes_its_origin() -> None:
     stop, th, failure = _serve_in_thread(svc)
     try:
         sim = subprocess.run(sim_command(tee.port, scenario="static", duration=6.0, speed=10), env=ENV,
-                             capture_output=True, text=True, timeout=60)
+                             capture_output=True, text=True, timeout=READY_TIMEOUT_S)
         assert sim.returncode == 0, sim.stderr
-        client.wait_quiet(0.5)
+        quiesce(tee, svc_port, client)
     finally:
         stop.set()
-        th.join(10.0)
+        th.join(EVENT_TIMEOUT_S)
         tee.close()
         client.close()
     assert not failure, f"service thread died: {failure[0]!r}"
@@ -579,7 +666,7 @@ def test_in_process_service_waits_for_gps_and_takes_its_origin() -> None:
 def test_waiting_is_announced_until_a_position_arrives() -> None:
     """Without --lat/--lon/--alt and before any GPS fix, a GCS must be told why nothing is published."""
     from mavins.engine import EngineConfig
-    from mavins.ingest import IngestConfig
+    from mavins.link.ingest import IngestConfig
     from mavins.service import Service, ServiceConfig
 
     svc_port = free_udp_port()
@@ -589,18 +676,26 @@ def test_waiting_is_announced_until_a_position_arrives() -> None:
     stop, th, failure = _serve_in_thread(svc)
     ap = mavutil.mavlink_connection(f"udpout:127.0.0.1:{svc_port}", source_system=SIM_SYSID, source_component=1,
                                     dialect="common")
+    sent = [0]
+
+    def told() -> bool:
+        """Level, resting IMU at 100 Hz of sensor time, no position at all, until WAITING and a HEARTBEAT came."""
+        for _ in range(5):
+            sent[0] += 1
+            ap.mav.highres_imu_send(sent[0] * 10_000, 0.0, 0.0, -9.807, 0.0, 0.0, 0.0, 0, 0, 0, 0, 0, 0, 20.0,
+                                    0b111111, 0)
+        msgs = list(client.msgs)
+        return any("WAITING" in m.text for m in msgs if m.get_type() == "STATUSTEXT") and \
+            any(m.get_type() == "HEARTBEAT" for m in msgs)
+
     try:
-        t0 = time.monotonic()
-        i = 0
-        while time.monotonic() - t0 < 2.5:  # 2.5 s of level, resting IMU at 100 Hz, no position at all
-            i += 1
-            ap.mav.highres_imu_send(i * 10_000, 0.0, 0.0, -9.807, 0.0, 0.0, 0.0, 0, 0, 0, 0, 0, 0, 20.0, 0b111111, 0)
-            time.sleep(0.01)
+        wait_until(told, "WAITING announced and a HEARTBEAT sent", poll=0.05)
+        wait_until_read(svc_port)
         waiting_texts = [m.text for m in list(client.msgs) if m.get_type() == "STATUSTEXT"]
         hb = [m for m in list(client.msgs) if m.get_type() == "HEARTBEAT"]
     finally:
         stop.set()
-        th.join(10.0)
+        th.join(EVENT_TIMEOUT_S)
         ap.close()
         client.close()
     assert not failure, f"service thread died: {failure[0]!r}"
@@ -612,7 +707,7 @@ def test_waiting_is_announced_until_a_position_arrives() -> None:
 def test_request_imu_asks_an_autopilot_that_sends_only_heartbeats() -> None:
     """PX4 sends no HIGHRES_IMU unless asked: --request-imu must ask on the strength of its HEARTBEAT."""
     from mavins.engine import EngineConfig
-    from mavins.ingest import IngestConfig
+    from mavins.link.ingest import IngestConfig
     from mavins.service import Service, ServiceConfig
 
     svc_port = free_udp_port()
@@ -621,16 +716,19 @@ def test_request_imu_asks_an_autopilot_that_sends_only_heartbeats() -> None:
     ap = mavutil.mavlink_connection(f"udpout:127.0.0.1:{svc_port}", source_system=1, source_component=1,
                                     dialect="common")
     asked = []
+
+    def ask() -> list:
+        ap.mav.heartbeat_send(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4, 0, 0, mavlink.MAV_STATE_STANDBY)
+        m = ap.recv_match(type="COMMAND_LONG", blocking=True, timeout=0.3)
+        if m is not None:
+            asked.append(m)
+        return asked
+
     try:
-        t0 = time.monotonic()
-        while time.monotonic() - t0 < 2.5 and not asked:
-            ap.mav.heartbeat_send(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4, 0, 0, mavlink.MAV_STATE_STANDBY)
-            m = ap.recv_match(type="COMMAND_LONG", blocking=True, timeout=0.3)
-            if m is not None:
-                asked.append(m)
+        wait_until(ask, "MAV_CMD_SET_MESSAGE_INTERVAL sent to an autopilot that only sends HEARTBEAT", poll=0.0)
     finally:
         stop.set()
-        th.join(10.0)
+        th.join(EVENT_TIMEOUT_S)
         ap.close()
     assert not failure, f"service thread died: {failure[0]!r}"
     assert asked, "no MAV_CMD_SET_MESSAGE_INTERVAL sent to an autopilot that only sends HEARTBEAT"

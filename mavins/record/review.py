@@ -35,6 +35,8 @@ PACKAGES = "xvfb mesa-vulkan-drivers libvulkan1"
 INSTALL_HINT = f"install them with: apt-get install -y {PACKAGES} (or scripts/install_viewer_deps.sh)"
 ICD_DIRS = ("/usr/share/vulkan/icd.d", "/etc/vulkan/icd.d", "/usr/local/share/vulkan/icd.d")
 XVFB_SCREEN = "1920x1080x24"  # at least; grown to fit the window
+RRD_MAGIC = b"RRF"  # every Rerun file starts with it (RRF2 since 0.x)
+MIN_SIZE, MAX_SIZE = (200, 150), (8192, 8192)  # window size in points
 
 
 class ViewerUnavailable(RuntimeError):
@@ -246,15 +248,51 @@ def screenshot(rrd: Path, out_png: Path, size: tuple[int, int] = (1600, 900), ti
     """
     rrd = Path(rrd)
     out_png = Path(out_png)
-    if not rrd.is_file():
-        raise FileNotFoundError(f"{rrd}: no such recording")
     w, h = (int(size[0]), int(size[1]))
-    if w < 200 or h < 150:
-        raise ValueError(f"window size {w}x{h} is too small")
+    if not (MIN_SIZE[0] <= w <= MAX_SIZE[0] and MIN_SIZE[1] <= h <= MAX_SIZE[1]):
+        raise ValueError(f"window size {w}x{h} is outside {MIN_SIZE[0]}x{MIN_SIZE[1]}..{MAX_SIZE[0]}x{MAX_SIZE[1]}")
+    check_recording(rrd)
+    from mavins.files import atomic_output, check_outputs
+
+    check_outputs({"--screenshot": out_png}, {"FILE.rrd": rrd})
     xvfb, icd = check_dependencies()
     cmd = rerun_binary()
-    out_png.parent.mkdir(parents=True, exist_ok=True)
-    out_png.unlink(missing_ok=True)
+    # the picture is drawn into a temporary file beside OUT.png, renamed into place once complete
+    with atomic_output(out_png) as png:
+        png.unlink()  # the viewer must create it: its absence tells that it failed
+        _render(rrd, png, cmd, xvfb, icd, w, h, timeout, at_end)
+        if not native_scale:
+            _resize(png, (w, h))
+
+
+def check_recording(rrd: Path) -> None:
+    """Refuse a file that is not a readable Rerun recording with a recording in it (FileNotFoundError or ValueError)."""
+    rrd = Path(rrd)
+    if not rrd.is_file():
+        raise FileNotFoundError(f"{rrd}: no such recording")
+    with open(rrd, "rb") as fh:
+        head = fh.read(8)
+    if not head:
+        raise ValueError(f"{rrd}: the file is empty (expected a Rerun recording, .rrd)")
+    if not head.startswith(RRD_MAGIC):
+        from mavins.files import FOUND, sniff
+
+        found = FOUND.get(sniff(head) or "", "")
+        raise ValueError(f"{rrd}: expected a Rerun recording (.rrd, starting with 'RRF'), found "
+                         + (found if found else f"bytes {head.hex(' ')}"))
+    try:
+        from rerun.chunk import RrdReader
+
+        recs = RrdReader(str(rrd)).recordings()
+    except Exception as exc:  # the reader's own errors on a damaged file
+        raise ValueError(f"{rrd}: not a readable Rerun recording: {exc}") from None
+    if not recs:
+        raise ValueError(f"{rrd}: expected a Rerun recording, found a file with no recording in it")
+
+
+def _render(rrd: Path, out_png: Path, cmd: list[str], xvfb: str, icd: str, w: int, h: int, timeout: float,
+            at_end: bool) -> None:
+    """Run the viewer under a private Xvfb until it wrote ``out_png``."""
     with tempfile.TemporaryDirectory(prefix="mavins-review-") as tmp:
         tmpdir = Path(tmp)
         runtime = tmpdir / "xdg-runtime"
@@ -303,8 +341,6 @@ def screenshot(rrd: Path, out_png: Path, size: tuple[int, int] = (1600, 900), ti
             if viewer is not None:
                 _stop(viewer)
             _stop(xserver)
-    if not native_scale:
-        _resize(out_png, (w, h))
 
 
 def _tail(path: Path, n: int = 3000) -> str:
@@ -314,12 +350,48 @@ def _tail(path: Path, n: int = 3000) -> str:
         return "(no log)"
 
 
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = text.lower().split("x")
-        return int(w), int(h)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, e.g. 1600x900, not {text!r}") from None
+class _Size:
+    """``--size WxH`` within MIN_SIZE..MAX_SIZE (the range is shown in --help)."""
+
+    __name__ = "size"
+    metavar = "WxH"
+
+    def describe(self, metavar: str | None = None) -> str:
+        return f"W in {MIN_SIZE[0]}..{MAX_SIZE[0]}, H in {MIN_SIZE[1]}..{MAX_SIZE[1]}"
+
+    def __call__(self, text: str) -> tuple[int, int]:
+        try:
+            w, h = str(text).lower().split("x")
+            size = int(w), int(h)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, e.g. 1600x900, not {text!r}") from None
+        if not (MIN_SIZE[0] <= size[0] <= MAX_SIZE[0] and MIN_SIZE[1] <= size[1] <= MAX_SIZE[1]):
+            raise argparse.ArgumentTypeError(f"{text} is outside the allowed range {self.describe()}")
+        return size
+
+
+class _Seconds:
+    """``--timeout S``: a finite number of seconds > 0 (the range is shown in --help)."""
+
+    __name__ = "seconds"
+    metavar = "S"
+
+    def describe(self, metavar: str | None = None) -> str:
+        return f"{metavar or self.metavar} > 0"
+
+    def __call__(self, text: str) -> float:
+        import math
+
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, {self.describe()}; got {text!r}") from None
+        if not (math.isfinite(v) and v > 0):
+            raise argparse.ArgumentTypeError(f"{text} is outside the allowed range {self.describe()}")
+        return v
+
+
+_size = _Size()
 
 
 DESCRIPTION = ("Render a Rerun recording to a PNG with Rerun's native viewer, headless "
@@ -330,8 +402,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     """The options of ``mavins review`` (also ``python -m mavins.record.review``)."""
     p.add_argument("rrd", type=Path, metavar="FILE.rrd", help="recording to render")
     p.add_argument("--screenshot", type=Path, required=True, metavar="OUT.png", help="PNG to write")
-    p.add_argument("--size", type=_size, default=(1600, 900), metavar="WxH", help="window size (default 1600x900)")
-    p.add_argument("--timeout", type=float, default=120.0, metavar="S", help="give up after S seconds (default 120)")
+    p.add_argument("--size", type=_Size(), default=(1600, 900), metavar="WxH",
+                   help=f"window size (default 1600x900; {_Size().describe()})")
+    p.add_argument("--timeout", type=_Seconds(), default=120.0, metavar="S",
+                   help="give up after S seconds (default 120; S > 0)")
     p.add_argument("--as-opened", action="store_true",
                    help="the viewer's opening state (cursor near the start, side panels as stored) instead of "
                         "the whole run with side panels hidden")
@@ -343,7 +417,7 @@ def run(args: argparse.Namespace, prog: str) -> int:
     try:
         screenshot(args.rrd, args.screenshot, args.size, args.timeout, at_end=not args.as_opened,
                    native_scale=args.native_scale)
-    except (FileNotFoundError, ValueError) as exc:
+    except (FileNotFoundError, ValueError) as exc:  # the recording or the options (DataFileError too)
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return 2
     except (ViewerUnavailable, ScreenshotError) as exc:
