@@ -50,7 +50,12 @@ class FilterSettings:
 
 @dataclass
 class LiveFilter:
-    """P, the bias estimates and the bookkeeping of one navigation run."""
+    """P, the bias estimates and the bookkeeping of one navigation run.
+
+    ``ratios`` are the published test ratios: the largest normalised innovation
+    component over the gate, squared (PX4's convention, innovation^2 / (gate^2
+    S); below 1 passes the gate).
+    """
 
     settings: FilterSettings
     counters: Counter = field(default_factory=Counter)
@@ -183,8 +188,7 @@ class LiveFilter:
             nu, H, R = kalman.gnss_position(s, cfg, lat, lon, h, self.lever, late, sig_h, sig_v)
             nis, ratio, ok = kalman.apply_update(s, cfg, self.bias, self.P, H, nu, R, gate)
             self._count("gnss_pos", ratio, ok)
-            self.ratios["pos"] = ratio
-            self.ratios["hgt"] = ratio
+            self.ratios["pos"] = self.ratios["hgt"] = ratio * ratio
             if ok:
                 lat1, lon1, _ = sd.position(s, cfg)
                 if math.hypot(*north_east_error(lat1, lon1, lat0, lon0)) > JUMP_M:
@@ -200,13 +204,13 @@ class LiveFilter:
                                                 max(tk - self.sums[6], 1e-3), sig_vel)
                 nis, ratio, ok = kalman.apply_update(s, cfg, self.bias, self.P, H, nu, R, gate)
                 self._count("gnss_vel", ratio, ok)
-                self.ratios["vel"] = ratio
+                self.ratios["vel"] = ratio * ratio
         elif kind == "baro":
             h, sigma = args
             nu, H, R = kalman.baro_height(s, self.bias, h, late, sigma)
             nis, ratio, ok = kalman.apply_update(s, cfg, self.bias, self.P, H, nu, R, gate)
             self._count("baro", ratio, ok)
-            self.ratios["hgt"] = ratio
+            self.ratios["hgt"] = ratio * ratio
             if ok:
                 self.last_hgt_t = t_m
         elif kind == "mag":
@@ -215,12 +219,12 @@ class LiveFilter:
                                           math.radians(self.settings.sigma_mag))
             nis, ratio, ok = kalman.apply_update(s, cfg, self.bias, self.P, H, nu, R, gate)
             self._count("mag", ratio, ok)
-            self.ratios["mag"] = ratio
+            self.ratios["mag"] = ratio * ratio
         elif kind == "zupt":
             nu, H, R = kalman.zupt(s, self.settings.sigma_zupt)
             nis, ratio, ok = kalman.apply_update(s, cfg, self.bias, self.P, H, nu, R, gate)
             self._count("zupt", ratio, ok)
-            self.ratios["vel"] = ratio
+            self.ratios["vel"] = ratio * ratio
 
     def _count(self, kind: str, ratio: float, ok: bool) -> None:
         self.counters[f"{kind}_{'accepted' if ok else 'rejected'}"] += 1

@@ -203,7 +203,7 @@ def _filter_options(g: argparse._ArgumentGroup, with_aiding: bool = True) -> Non
                    help="the filter's IMU error model from a TOML file (gyro_arw, gyro_bias, ... : docs/conventions.md)")
     g.add_argument("--gate", type=_real(0.0, 1e3, above=True), default=5.0, metavar="N",
                    help="reject a measurement whose normalised innovation exceeds N sigma")
-    g.add_argument("--lever-arm", type=_Vec3(), default=(0.0, 0.0, 0.0), metavar="X,Y,Z",
+    g.add_argument("--lever-arm", type=_Vec3(), default="0,0,0", metavar="X,Y,Z",
                    help="GNSS antenna position from the IMU, body frame FRD (m)")
 
 

@@ -231,7 +231,7 @@ class Service:
         elif name == "TIMESYNC" and msg.tc1 == 0:
             # a request: answer at once with our clock, theirs echoed (docs/autopilots.md)
             self._send([publish.timesync_reply(self.mav, msg.ts1, time.monotonic_ns())])
-        elif name == "GPS_RAW_INT" and msg.time_usec > UNIX_USEC_MIN and self.pipeline.last_sample is not None:
+        elif name == "GPS_RAW_INT" and UNIX_USEC_MIN < msg.time_usec < 2**63 and self.pipeline.last_sample is not None:
             self._utc_offset = msg.time_usec * 1e-6 - self.pipeline.last_sample.t
         elif name == "COMMAND_ACK" and msg.command == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
             ok = msg.result == mavlink.MAV_RESULT_ACCEPTED
@@ -245,8 +245,9 @@ class Service:
             if k != self._status_tick:
                 self._status_tick = k
                 msgs += publish.estimator_status(self.mav, out)
-                if self._utc_offset is not None:
-                    msgs.append(publish.system_time(self.mav, int((t + self._utc_offset) * 1e6), t))
+                unix_usec = int((t + self._utc_offset) * 1e6) if self._utc_offset is not None else -1
+                if UNIX_USEC_MIN <= unix_usec < 2**63:
+                    msgs.append(publish.system_time(self.mav, unix_usec, t))
             if self.cfg.publish.gps_input and int(t * GPS_INPUT_RATE_HZ) != self._gps_tick:
                 self._gps_tick = int(t * GPS_INPUT_RATE_HZ)
                 msgs.append(publish.gps_input(self.mav, out, self.cfg.publish, self._gps_time(t)))

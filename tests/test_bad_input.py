@@ -364,7 +364,9 @@ def _bad_values(kind: object) -> list[str]:
         return vals
     name = type(kind).__name__
     return {"_Heading": ["400", "-361", "nan", "north"], "_Speed": ["0", "-1", "nan", "fast"],
-            "_Size": ["10x10", "20000x900", "abc"], "_Seconds": ["0", "-5", "nan", "soon"]}[name]
+            "_Size": ["10x10", "20000x900", "abc"], "_Seconds": ["0", "-5", "nan", "soon"],
+            "_Vec3": ["1,2", "1,2,nan", "1,2,5000", "abc"], "_Aiding": ["gps", "gnss,foo", ","],
+            "_Outage": ["5,1", "-1,2", "nan,3", "abc"]}[name]
 
 
 NUMERIC = _numeric_options()
@@ -518,7 +520,7 @@ def test_successful_writers_replace_in_one_step_and_leave_no_temporary(world: Pa
     code, stderr = run_cli("sim", "static", "--duration", "1", "-o", "a/b/simout")
     assert code == 0, stderr
     assert sorted(p.name for p in (world / "a/b/simout").iterdir()) == sorted(
-        ["imu.csv", "imu_rates.csv", "truth.csv", "init.json"])
+        ["imu.csv", "imu_rates.csv", "truth.csv", "init.json", "gnss.csv", "baro.csv"])
     hidden = [p for p in world.rglob(".*")]
     assert not hidden, f"temporary files left behind: {hidden}"
 

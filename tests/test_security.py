@@ -38,7 +38,7 @@ import numpy as np
 import pytest
 
 os.environ.setdefault("MAVLINK20", "1")
-from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
+from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 from sim.generate import generate  # noqa: E402
 from support import recv_stamped, udp_stats, wait_for_room, wait_until, wait_until_read  # noqa: E402

@@ -67,7 +67,7 @@ import pytest
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
-from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
+from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 from support import (  # noqa: E402
     EVENT_TIMEOUT_S, READY_TIMEOUT_S, kernel_drops, recv_stamped, roomy, summary, wait_for_line, wait_for_room,
@@ -372,7 +372,7 @@ def flight_run(tmp_path_factory: pytest.TempPathFactory) -> Run:
             svc = subprocess.Popen(
                 [*MAVINS, "run", "--master", f"udpin:127.0.0.1:{svc_port}", "--out", f"udpout:127.0.0.1:{client.port}",
                  "--lat", str(START[0]), "--lon", str(START[1]), "--alt", str(START[2]),
-                 "--heading", "vehicle", "--gyro-bias", "none", "--align", str(ALIGN_S),
+                 "--heading", "vehicle", "--gyro-bias", "none", "--aiding", "none", "--align", str(ALIGN_S),
                  "--geoid-height", str(GEOID_M), "--rate", str(OUT_RATE), "-o", str(nav_csv)],
                 stdout=log, stderr=subprocess.STDOUT, env=ENV, cwd=tmp)
         wait_for_line(log_path, "ready: listening on", svc)
@@ -621,6 +621,7 @@ def _serve_in_thread(svc) -> tuple[threading.Event, threading.Thread, list[BaseE
 
 def test_in_process_service_waits_for_gps_and_takes_its_origin() -> None:
     """No --lat/--lon/--alt: WAITING until the vehicle's GPS_RAW_INT, then the origin is that fix."""
+    from mavins.aiding import FilterSettings
     from mavins.engine import EngineConfig
     from mavins.link.ingest import IngestConfig
     from mavins.service import Service, ServiceConfig
@@ -628,7 +629,7 @@ def test_in_process_service_waits_for_gps_and_takes_its_origin() -> None:
     svc_port = free_udp_port()
     client = Client()
     tee = Tee(svc_port)
-    svc = Service(EngineConfig(heading=30.0, align=2.0, gyro_bias="none"), IngestConfig(),
+    svc = Service(EngineConfig(heading=30.0, align=2.0, gyro_bias="none", filter=FilterSettings(aiding=())), IngestConfig(),
                   ServiceConfig(master=f"udpin:127.0.0.1:{svc_port}", outs=[f"udpout:127.0.0.1:{client.port}"],
                                 compid=197))
     stop, th, failure = _serve_in_thread(svc)
@@ -675,7 +676,7 @@ def test_waiting_is_announced_until_a_position_arrives() -> None:
                   ServiceConfig(master=f"udpin:127.0.0.1:{svc_port}", outs=[f"udpout:127.0.0.1:{client.port}"]))
     stop, th, failure = _serve_in_thread(svc)
     ap = mavutil.mavlink_connection(f"udpout:127.0.0.1:{svc_port}", source_system=SIM_SYSID, source_component=1,
-                                    dialect="common")
+                                    dialect="ardupilotmega")
     sent = [0]
 
     def told() -> bool:
@@ -714,7 +715,7 @@ def test_request_imu_asks_an_autopilot_that_sends_only_heartbeats() -> None:
     svc = Service(EngineConfig(), IngestConfig(), ServiceConfig(master=f"udpin:127.0.0.1:{svc_port}", request_imu=200.0))
     stop, th, failure = _serve_in_thread(svc)
     ap = mavutil.mavlink_connection(f"udpout:127.0.0.1:{svc_port}", source_system=1, source_component=1,
-                                    dialect="common")
+                                    dialect="ardupilotmega")
     asked = []
 
     def ask() -> list:

@@ -1023,17 +1023,21 @@ def test_unknown_perturbation_key_rejected(tmp_path: Path) -> None:
 
 
 def test_cli_sim_writes_contract_files(tmp_path: Path) -> None:
-    """`mavins sim static -o DIR --duration 5`: the four files, contract columns, rates * dt == increments."""
+    """`mavins sim static -o DIR --duration 5`: the contract's four files and the aiding files (GNSS at
+    1 Hz, baro), contract columns, rates * dt == increments."""
     out = tmp_path / "out"
     proc = subprocess.run([sys.executable, "-m", "mavins.cli", "sim", "static", "-o", str(out), "--duration", "5"],
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
-    assert sorted(p.name for p in out.iterdir()) == ["imu.csv", "imu_rates.csv", "init.json", "truth.csv"]
+    assert sorted(p.name for p in out.iterdir()) == ["baro.csv", "gnss.csv", "imu.csv", "imu_rates.csv", "init.json",
+                                                     "truth.csv"]
     header = lambda p: (out / p).read_text().splitlines()[0].split(",")  # noqa: E731
     assert header("imu.csv") == list(files.INCREMENT_COLUMNS)
     assert header("imu_rates.csv") == list(files.RATE_COLUMNS)
     assert header("truth.csv")[:14] == list(files.SOLUTION_COLUMNS)
     assert header("truth.csv") == list(SimResult.TRUTH_COLUMNS)
+    assert header("gnss.csv")[:4] == ["t", "lat", "lon", "h"] and header("baro.csv")[:2] == ["t", "h"]
+    assert len((out / "gnss.csv").read_text().splitlines()) == 1 + 5  # one fix per second of the 5 s
     init = json.loads((out / "init.json").read_text())
     assert set(init) == set(files.INIT_KEYS)
     imu = files.read_table(out / "imu.csv", files.INCREMENT_COLUMNS)

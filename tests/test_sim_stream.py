@@ -127,7 +127,7 @@ class Received:
 
 def _receive(send, port: int, timeout: float = EVENT_TIMEOUT_S) -> Received:
     """Run send() in a thread while a plain pymavlink udpin connection collects every message."""
-    rx = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", dialect="common")
+    rx = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", dialect="ardupilotmega")
     roomy(rx.port)
     result: dict = {}
     th = threading.Thread(target=lambda: result.setdefault("out", send()), daemon=True)

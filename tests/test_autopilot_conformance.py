@@ -1,0 +1,203 @@
+"""What PX4, ArduPilot and ground stations do with the service's output, checked on a live run.
+
+Each rule below is read from the consumer's own source (docs/autopilots.md):
+
+* PX4 ``src/modules/mavlink/mavlink_receiver.cpp`` (ODOMETRY handler): only
+  ``estimator_type`` UNKNOWN, NAIVE, VISION or VIO reach EKF2's external
+  vision; ``frame_id`` must be LOCAL_NED, LOCAL_FRD, ENU or FLU and the
+  velocity frame LOCAL_* or BODY_FRD; only the covariance diagonals are read;
+  a ``reset_counter`` change is a reset; ``quality`` is gated by EKF2_EV_QMIN.
+* ArduPilot ``AP_VisualOdom`` (MAVLink backend): LOCAL_FRD / BODY_FRD; errors
+  from the covariance; data ignored for 1 s after a reset_counter change;
+  ``AP_GPS_MAV`` (GPS_TYPE 14) takes GPS_INPUT with fix type, accuracies, yaw.
+* QGroundControl reads ESTIMATOR_STATUS flags, ratios and accuracies;
+  MAVProxy's console colours its EKF light from EKF_STATUS_REPORT's largest
+  variance (green below 0.5).
+* TIMESYNC: a request (tc1 = 0) must be answered with tc1 != 0 and ts1 echoed.
+
+The simulator streams HIGHRES_IMU at 200 Hz and GPS_RAW_INT at 5 Hz of a
+vehicle at rest (heading 30 deg) for 45 s of sensor time; the checks use the
+last 20 s. Rates are per second of sensor time (the messages' own stamps), so
+the test does not depend on the machine's speed.
+"""
+
+from __future__ import annotations
+
+import math
+import signal
+import socket
+import subprocess
+import threading
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from support import ENV, MAVINS, free_udp_port, mavins, wait_for_line
+from mavins.link.mavlink import mavlink
+
+DURATION_S = 45.0
+WINDOW_S = 20.0  # the last 20 s
+HEADING_DEG = 30.0  # sim/scenarios/static.toml
+DIAG = (0, 6, 11, 15, 18, 20)
+START = ("47.397742", "8.545594", "488.0")
+
+
+@dataclass
+class Received:
+    msgs: dict[str, list] = field(default_factory=dict)
+
+    def of(self, name: str) -> list:
+        return self.msgs.get(name, [])
+
+
+def _listen(sock: socket.socket, into: Received, stop: threading.Event) -> None:
+    parser = mavlink.MAVLink(None)
+    parser.robust_parsing = True
+    sock.settimeout(0.1)
+    while not stop.is_set():
+        try:
+            data = sock.recv(65535)
+        except socket.timeout:
+            continue
+        for m in parser.parse_buffer(data) or []:
+            into.msgs.setdefault(m.get_type(), []).append(m)
+
+
+def _run(tmp: Path, *extra: str) -> tuple[Received, str]:
+    """Serve a 45 s rest stream (at 5x real time); ask for TIMESYNC once navigating."""
+    port = free_udp_port()
+    client = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    client.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
+    client.bind(("127.0.0.1", 0))
+    got, stop = Received(), threading.Event()
+    th = threading.Thread(target=_listen, args=(client, got, stop), daemon=True)
+    th.start()
+    log_path = tmp / "svc.log"
+    with open(log_path, "w") as log:
+        svc = subprocess.Popen([*MAVINS, "run", "--master", f"udpin:127.0.0.1:{port}", "--out",
+                                f"udpout:127.0.0.1:{client.getsockname()[1]}", "--lat", START[0], "--lon", START[1],
+                                "--alt", START[2], "--heading", "vehicle", "--align", "5", "--rate", "10",
+                                "--grade", "tactical", *extra],
+                               stdout=log, stderr=subprocess.STDOUT, env=ENV, cwd=tmp)
+    try:
+        wait_for_line(log_path, "ready: listening on", svc)
+        sim = subprocess.Popen([*MAVINS, "sim", "static", "--rate", "200", "--grade", "tactical", "--duration",
+                                str(DURATION_S), "--speed", "5", "--stream", f"udpout:127.0.0.1:{port}"],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=ENV, cwd=tmp, text=True)
+        wait_for_line(log_path, "NAVIGATING", svc)
+        req = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as gcs:
+            gcs.sendto(req.timesync_encode(0, 123456789).pack(req), ("127.0.0.1", port))
+        _, err = sim.communicate(timeout=600)
+        assert sim.returncode == 0, err
+        svc.send_signal(signal.SIGTERM)
+        svc.wait(120)
+    finally:
+        if svc.poll() is None:
+            svc.kill()
+            svc.wait(10)
+        stop.set()
+        th.join(5)
+        client.close()
+    text = log_path.read_text()
+    assert svc.returncode == 0, text
+    return got, text
+
+
+def _last(msgs: list, t_end: float, stamp: str = "time_usec") -> list:
+    return [m for m in msgs if getattr(m, stamp) * 1e-6 > t_end - WINDOW_S]
+
+
+def _per_second(msgs: list, t_end: float, stamp: str = "time_usec") -> list[int]:
+    t = np.array([getattr(m, stamp) * 1e-6 for m in msgs])
+    # whole seconds strictly inside the window, edges half a second off the stamps' whole seconds
+    starts = np.arange(t_end - WINDOW_S + 0.5, t_end - 1.0, 1.0)
+    return [int(np.sum((t > a) & (t <= a + 1.0))) for a in starts]
+
+
+@pytest.fixture(scope="module")
+def aided(tmp_path_factory: pytest.TempPathFactory) -> tuple[Received, str]:
+    return _run(tmp_path_factory.mktemp("aided"), "--gps-input")
+
+
+@pytest.fixture(scope="module")
+def free(tmp_path_factory: pytest.TempPathFactory) -> tuple[Received, str]:
+    return _run(tmp_path_factory.mktemp("free"), "--aiding", "none")
+
+
+def test_odometry_is_what_ekf2_and_ekf3_fuse(aided: tuple[Received, str]) -> None:
+    got, log = aided
+    odo = got.of("ODOMETRY")
+    assert odo, log
+    t_end = max(m.time_usec for m in odo) * 1e-6
+    last = _last(odo, t_end)
+    assert min(_per_second(last, t_end)) >= 4
+    for m in last:
+        assert m.frame_id == mavlink.MAV_FRAME_LOCAL_FRD and m.child_frame_id == mavlink.MAV_FRAME_BODY_FRD
+        assert m.estimator_type == mavlink.MAV_ESTIMATOR_TYPE_VIO  # PX4 drops GPS/GPS_INS
+        for cov in (m.pose_covariance, m.velocity_covariance):
+            assert all(math.isfinite(cov[i]) and cov[i] > 0.0 for i in DIAG)
+        assert math.sqrt(0.5 * (m.pose_covariance[0] + m.pose_covariance[6])) <= 5.0
+        assert 1 <= m.quality <= 100
+    assert len({m.reset_counter for m in last}) == 1  # no reset at rest with steady GNSS
+
+
+def test_estimator_status_and_ekf_status_report(aided: tuple[Received, str]) -> None:
+    got, log = aided
+    est = got.of("ESTIMATOR_STATUS")
+    assert est, log
+    t_end = max(m.time_usec for m in est) * 1e-6
+    last = _last(est, t_end)
+    assert min(_per_second(last, t_end)) >= 1
+    need = (mavlink.ESTIMATOR_ATTITUDE | mavlink.ESTIMATOR_VELOCITY_HORIZ | mavlink.ESTIMATOR_VELOCITY_VERT
+            | mavlink.ESTIMATOR_POS_HORIZ_ABS)
+    for m in last:
+        assert m.flags & need == need, bin(m.flags)
+        assert not m.flags & mavlink.ESTIMATOR_CONST_POS_MODE
+        assert not m.flags & mavlink.ESTIMATOR_GPS_GLITCH
+        assert 0.0 <= m.pos_horiz_ratio < 1.0 and 0.0 <= m.pos_vert_ratio < 1.0
+        assert 0.0 < m.pos_horiz_accuracy <= 5.0 and 0.0 < m.pos_vert_accuracy <= 5.0
+    ekf = got.of("EKF_STATUS_REPORT")
+    assert len(ekf) >= len(last)  # sent with each ESTIMATOR_STATUS
+    for m in ekf[-len(last):]:
+        assert m.flags & (mavlink.EKF_ATTITUDE | mavlink.EKF_POS_HORIZ_ABS) == (mavlink.EKF_ATTITUDE
+                                                                                  | mavlink.EKF_POS_HORIZ_ABS)
+        assert max(m.velocity_variance, m.pos_horiz_variance, m.pos_vert_variance, m.compass_variance) < 0.5
+
+
+def test_gps_input_carries_the_solution(aided: tuple[Received, str]) -> None:
+    got, log = aided
+    gps = got.of("GPS_INPUT")
+    assert gps, log
+    t_end = max(m.time_usec for m in gps) * 1e-6
+    last = _last(gps, t_end)
+    assert min(_per_second(last, t_end)) >= 5
+    for m in last:
+        assert m.fix_type == 3 and m.gps_id == 0
+        assert 0.0 < m.horiz_accuracy <= 5.0 and 0.0 < m.vert_accuracy <= 5.0
+        assert abs((m.yaw / 100.0 - HEADING_DEG + 180.0) % 360.0 - 180.0) < 1.0  # cdeg, the true heading
+        assert abs(m.lat * 1e-7 - float(START[0])) < 1e-4 and abs(m.lon * 1e-7 - float(START[1])) < 1e-4
+
+
+def test_timesync_request_is_answered(aided: tuple[Received, str]) -> None:
+    got, log = aided
+    answers = [m for m in got.of("TIMESYNC") if m.ts1 == 123456789]
+    assert answers and all(m.tc1 > 0 for m in answers), log
+
+
+def test_free_inertial_is_flagged_and_its_uncertainty_grows(free: tuple[Received, str]) -> None:
+    got, log = free
+    est = got.of("ESTIMATOR_STATUS")
+    assert est, log
+    for m in est:
+        assert m.flags & mavlink.ESTIMATOR_ATTITUDE
+        assert not m.flags & mavlink.ESTIMATOR_POS_HORIZ_ABS
+        assert m.flags & mavlink.ESTIMATOR_CONST_POS_MODE
+    acc = [m.pos_horiz_accuracy for m in est]
+    assert all(b >= a for a, b in zip(acc, acc[1:])) and acc[-1] > acc[0]
+    odo = got.of("ODOMETRY")
+    assert all(math.isfinite(m.pose_covariance[i]) for m in odo for i in DIAG)
+    assert odo[-1].pose_covariance[0] > odo[0].pose_covariance[0]
+    assert not got.of("GPS_INPUT")  # only with --gps-input
