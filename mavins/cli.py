@@ -714,6 +714,11 @@ def _add_demo(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--rerun-serve", action="store_true", help="also serve the recording to a live viewer")
     p.add_argument("--no-rerun", action="store_true", help="do not record")
     p.add_argument("--seed", type=_positive_int(0), default=0, metavar="N", help="random seed of the sensor errors")
+    p.add_argument("--aiding", type=_Aiding(), default="gnss,baro", metavar="KINDS",
+                   help="what the service aids with from the simulator's stream (gnss,baro,mag,zupt), or none")
+    p.add_argument("--gnss-outage", type=_Outage(), default="60,90", metavar="START,END",
+                   help="no GNSS between these sensor times (s)")
+    p.add_argument("--no-outage", action="store_true", help="GNSS throughout")
     p.set_defaults(func=_cmd_demo)
 
 
@@ -746,7 +751,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     stop = threading.Event()
     try:
         report = run_demo(args.scenario, args.duration, speed, args.grade, heading,  # type: ignore[arg-type]
-                          None if args.no_rerun else args.rerun, args.rerun_serve, args.seed, stop)
+                          None if args.no_rerun else args.rerun, args.rerun_serve, args.seed, stop,
+                          aiding=args.aiding, gnss_outage=None if args.no_outage else args.gnss_outage)
     except KeyboardInterrupt:
         stop.set()
         print("mavins demo: interrupted", file=sys.stderr)

@@ -129,6 +129,11 @@ class Engine:
         self._vehicle_yaw = yaw_rad
 
     @property
+    def origin(self) -> tuple[float, float, float] | None:
+        """The local frame's origin (deg, deg, ellipsoidal m): the initial position, once known."""
+        return self._pos
+
+    @property
     def position_known(self) -> bool:
         return self._pos is not None
 

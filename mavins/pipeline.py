@@ -73,6 +73,9 @@ class Pipeline:
             else:
                 t, lat, lon, h, vel, sig_h, sig_v, sig_vel = fix
                 self.engine.on_gnss(self._on_imu_clock(t), lat, lon, h, vel, sig_h, sig_v, sig_vel, name)
+                origin = self.engine.origin
+                if self.recorder is not None and origin is not None and self.last_sample is not None:
+                    self.recorder.on_gnss(self.last_sample.t, local_ned(math.radians(lat), math.radians(lon), h, origin))
         elif name == "SCALED_PRESSURE" and math.isfinite(msg.press_abs) and msg.press_abs > 0.0:  # type: ignore[attr-defined]
             self.engine.on_baro(self._on_imu_clock(msg.time_boot_ms * 1e-3), isa_height(msg.press_abs),  # type: ignore[attr-defined]
                                 BARO_SIGMA_M)
@@ -103,6 +106,8 @@ class Pipeline:
             if out is not None:
                 r = out.row
                 rec.on_output(r, out.origin, local_ned(float(r[1]), float(r[2]), float(r[3]), out.origin))
+                if out.unc is not None:
+                    rec.on_filter(float(r[0]), out.unc)
                 self._outputs += 1
                 if self._outputs % 50 == 1:
                     counts = {f"rejected_{k}": v for k, v in self.ingest.rejected.items()}

@@ -88,8 +88,12 @@ def blueprint():  # type: ignore[no-untyped-def]
                 series("/plots/position", "Position from origin (m)"),
                 rrb.Horizontal(
                     series("/errors/attitude", "Attitude error (deg)"),
-                    series("/errors", "Position (m) / velocity (m/s) error",
-                           contents=["+ /errors/position", "+ /errors/velocity"]),
+                    series("/errors", "Position (m) / velocity (m/s) error, published 3-sigma",
+                           contents=["+ /errors/position", "+ /errors/velocity", "+ /errors/position_3sigma"]),
+                ),
+                rrb.Horizontal(
+                    series("/filter/sigma_pos", "Filter 1-sigma position (m)"),
+                    series("/filter/test_ratios", "Test ratios (below 1 passes)"),
                 ),
             ),
             rrb.Vertical(
@@ -133,6 +137,7 @@ class Recorder:
         self.live = live
         self._buf: dict[str, list[tuple[float, float, list[float]]]] = defaultdict(list)
         self._traj: list[list[float]] = []
+        self._gnss: list[list[float]] = []
         self._traj_stride = 1
         self._traj_n = 0
         self._traj_last = -math.inf
@@ -162,6 +167,10 @@ class Recorder:
             "/health/sample_interval": (["sample interval (ms)"], [[150, 150, 150]]),
             "/health/output_rate": (["output rate (Hz)"], [[100, 200, 200]]),
             "/health/latency": (["processing latency (ms)"], [[220, 120, 220]]),
+            "/filter/sigma_pos": (["1-sigma north", "1-sigma east", "1-sigma down"], XYZ),
+            "/filter/test_ratios": (["position", "velocity", "height", "magnetometer"],
+                                    [[0, 170, 255], [230, 60, 60], [60, 170, 60], [200, 160, 0]]),
+            "/errors/position_3sigma": (["3-sigma horizontal (published)"], [[150, 150, 150]]),
         }
         for path, (names, colors) in series.items():
             self.rec.log(path, rr.SeriesLines(names=names, colors=colors), static=True)
@@ -264,6 +273,25 @@ class Recorder:
             t = self._last_sample_t if self._last_sample_t is not None else 0.0
         self.rec.set_time("sensor_time", duration=t)
         self.rec.log("/log", rr.TextLog(text, level=lvl))
+
+    def on_filter(self, t: float, unc: object) -> None:
+        """The filter's 1-sigma position (m), test ratios and the published horizontal 3-sigma
+        (docs/filter.md); a ratio not measured yet is left out."""
+        sig = unc.sigma_pos  # type: ignore[attr-defined]
+        self._push("/filter/sigma_pos", t, [float(x) for x in sig])
+        ratios = [unc.pos_ratio, unc.vel_ratio, unc.hgt_ratio, unc.mag_ratio]  # type: ignore[attr-defined]
+        self._push("/filter/test_ratios", t, [float(r) if math.isfinite(r) else 0.0 for r in ratios])
+        self._push("/errors/position_3sigma", t, [3.0 * math.sqrt(0.5 * (sig[0] ** 2 + sig[1] ** 2))])
+
+    def on_gnss(self, t: float, ned: np.ndarray) -> None:
+        """A GNSS fix (NED m from the origin), shown as a point in the 3D view (at most
+        TRAJ_POINTS, thinned like the trajectory)."""
+        self._gnss.append([float(x) for x in ned])
+        if len(self._gnss) > TRAJ_POINTS:
+            self._gnss = self._gnss[::2]
+        if len(self._gnss) % 10 == 1:
+            self.rec.set_time("sensor_time", duration=t)
+            self.rec.log("/world/gnss", self.rr.Points3D(self._gnss, colors=[[255, 60, 200]], radii=0.4))
 
     def on_counters(self, t: float, counters: dict[str, int]) -> None:
         """Counts so far: rejected samples by reason, bridged and long gaps, restarts (one entity each)."""

@@ -20,6 +20,8 @@ class Sink(Protocol):
     def on_counters(self, t: float, counters: dict[str, int]) -> None: ...
     def on_event(self, t: float | None, level: str, text: str) -> None: ...
     def on_latency(self, t: float, ms: float) -> None: ...
+    def on_filter(self, t: float, unc: object) -> None: ...
+    def on_gnss(self, t: float, ned: np.ndarray) -> None: ...
     def close(self) -> None: ...
 
 
@@ -57,6 +59,12 @@ class GuardedSink:
 
     def on_latency(self, t: float, ms: float) -> None:
         self._call("on_latency", t, ms)
+
+    def on_filter(self, t: float, unc: object) -> None:
+        self._call("on_filter", t, unc)
+
+    def on_gnss(self, t: float, ned: np.ndarray) -> None:
+        self._call("on_gnss", t, ned)
 
     def close(self) -> None:
         self._call("close")
