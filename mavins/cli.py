@@ -465,8 +465,25 @@ _IMU_NAMES = {"auto": "auto", "highres": "HIGHRES_IMU", "raw": "RAW_IMU", "scale
               "scaled2": "SCALED_IMU2", "scaled3": "SCALED_IMU3"}
 
 
+def _typed_options(parser: argparse.ArgumentParser, argv: Sequence[str]) -> set[str]:
+    """The destinations of the options typed on the command line (``--x V`` or ``--x=V``), so that
+    --config never overrides them, even with a typed value equal to the default."""
+    sub = next((a for a in parser._actions if isinstance(a, argparse._SubParsersAction)), None)
+    parsers = [parser] + (list(sub.choices.values()) if sub is not None else [])
+    strings = {o: a.dest for p in parsers for a in p._actions for o in a.option_strings}
+    typed = set()
+    for tok in argv:
+        if tok == "--":
+            break
+        if tok.startswith("-"):
+            name = tok.split("=", 1)[0]
+            if name in strings:
+                typed.add(strings[name])
+    return typed
+
+
 def _apply_config(args: argparse.Namespace, parser: argparse.ArgumentParser) -> None:
-    """Fill options from --config where the command line left the default."""
+    """Fill options from --config, except those typed on the command line (which win)."""
     path = getattr(args, "config", None)
     if path is None:
         return
@@ -503,7 +520,7 @@ def _apply_config(args: argparse.Namespace, parser: argparse.ArgumentParser) -> 
                                                  f"got {value!r}")
         except (argparse.ArgumentTypeError, ValueError, TypeError) as exc:
             fail(f"{key}: {exc}")
-        if getattr(args, dest) == parser.get_default(dest):
+        if dest not in getattr(args, "typed", set()):
             setattr(args, dest, value)
 
 
@@ -845,7 +862,9 @@ _EXTRA_COMMANDS: list[Callable[[argparse._SubParsersAction], None]] = [_add_sim,
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``mavins`` console script."""
     parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
     args = parser.parse_args(argv)
+    args.typed = _typed_options(parser, argv)
     if not getattr(args, "func", None):
         parser.print_help()
         return EXIT_USAGE

@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from support import ENV, MAVINS, free_udp_port, mavins, wait_for_line
+from support import ENV, MAVINS, free_udp_port, wait_for_line
 from mavins.link.mavlink import mavlink
 
 DURATION_S = 45.0
@@ -201,3 +201,51 @@ def test_free_inertial_is_flagged_and_its_uncertainty_grows(free: tuple[Received
     assert all(math.isfinite(m.pose_covariance[i]) for m in odo for i in DIAG)
     assert odo[-1].pose_covariance[0] > odo[0].pose_covariance[0]
     assert not got.of("GPS_INPUT")  # only with --gps-input
+
+
+def test_realignment_increments_reset_counter_once(tmp_path: Path) -> None:
+    """An autopilot restart (sensor time back to boot) re-aligns: ODOMETRY's reset_counter grows by
+    exactly one (PX4 and ArduPilot reset their fusion on a change), nothing is published while
+    re-aligning, and the estimator flags come back with attitude."""
+    from mavins.engine import EngineConfig
+    from mavins.link.ingest import IngestConfig
+    from mavins.service import Service, ServiceConfig
+
+    client = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    client.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
+    client.bind(("127.0.0.1", 0))
+    port = free_udp_port()
+    svc = Service(EngineConfig(lat=47.0, lon=8.0, alt=400.0, heading=30.0, align=1.0, rate=10.0), IngestConfig(),
+                  ServiceConfig(master=f"udpin:127.0.0.1:{port}", outs=[f"udpout:127.0.0.1:{client.getsockname()[1]}"]))
+    got, stop_rx, stop_svc = Received(), threading.Event(), threading.Event()
+    rx = threading.Thread(target=_listen, args=(client, got, stop_rx), daemon=True)
+    rx.start()
+    runner = threading.Thread(target=svc.run, args=(stop_svc,), daemon=True)
+    runner.start()
+    mav = mavlink.MAVLink(None, srcSystem=7, srcComponent=1)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+        for boot in range(2):  # 3 s at 200 Hz, then the autopilot restarts and sends 3 s again
+            for i in range(600):
+                m = mavlink.MAVLink_highres_imu_message(1_000_000 + 5000 * i, 0.0, 0.0, -9.806, 0.0, 0.0, 0.0,
+                                                        0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 20.0, 0b111111, 0)
+                tx.sendto(m.pack(mav), ("127.0.0.1", port))
+                if i % 50 == 49:
+                    threading.Event().wait(0.01)
+    for _ in range(300):  # until both runs' last output set arrived (sensor time 3.995 s twice)
+        if sum(1 for m in got.of("ODOMETRY") if m.time_usec >= 3_900_000) >= 2:
+            break
+        threading.Event().wait(0.05)
+    stop_svc.set()
+    runner.join(30)
+    stop_rx.set()
+    rx.join(5)
+    client.close()
+    odo = got.of("ODOMETRY")
+    counters = [m.reset_counter for m in odo]
+    changes = [i for i in range(1, len(counters)) if counters[i] != counters[i - 1]]
+    assert len(changes) == 1 and counters[changes[0]] == counters[0] + 1, counters
+    k = changes[0]
+    # the new run starts after its 1 s re-alignment, at its own sensor time
+    assert odo[k].time_usec < odo[k - 1].time_usec and odo[k].time_usec >= 2_000_000
+    est = got.of("ESTIMATOR_STATUS")
+    assert est and est[-1].flags & mavlink.ESTIMATOR_ATTITUDE

@@ -30,9 +30,6 @@ from __future__ import annotations
 import math
 import os
 import re
-import signal
-import socket
-import subprocess
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -41,8 +38,7 @@ import numpy as np
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
 
-from support import ENV, EVENT_TIMEOUT_S, MAVINS, free_udp_port, summary, wait_for_line, wait_for_room, \
-    wait_until_read  # noqa: E402
+from support import ServiceProcess  # noqa: E402
 
 # typed: NIMA TR8350.2 / docs/conventions.md
 A = 6378137.0
@@ -109,68 +105,7 @@ class Board:
         return self.c_nb() @ m_n
 
 
-FEED_ROOM = 4096  # bytes the kernel may hold unread for the service (about 4 small datagrams, by its accounting)
-
-
-# --- the service as a subprocess fed over UDP ---------------------------------------------------
-class Feed:
-    """File-like sink for a pymavlink encoder: one datagram per frame to the service, paced so the
-    service's socket never holds more than a few datagrams unread (support.wait_for_room with a
-    4 KiB limit, checked every 4 frames). Every sample must be navigated for the closed form to
-    hold, and the service skips input that waited over 0.25 s once it keeps finding such input
-    for 2 s (docs/reliability.md): with at most ~8 datagrams ahead of any one, even a slow service
-    (ms per sample) reads each long before that, so no sample is ever shed."""
-
-    def __init__(self, port: int) -> None:
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.bind(("127.0.0.1", 0))
-        self.dest = ("127.0.0.1", port)
-        self.n = 0
-
-    def write(self, buf: bytes) -> None:
-        if self.n % 4 == 3:
-            wait_for_room(self.dest[1], FEED_ROOM)
-        self.sock.sendto(buf, self.dest)
-        self.n += 1
-
-
-@dataclass
-class Result:
-    log: str
-    counters: dict[str, str]
-    nav: np.ndarray
-
-
-class Service:
-    """``mavins run OPTIONS`` listening on a free port of 127.0.0.1, writing ``-o nav.csv``."""
-
-    def __init__(self, tmp: Path, *options: str) -> None:
-        self.port = free_udp_port()
-        self.log_path, self.nav_path = tmp / "service.log", tmp / "nav.csv"
-        cmd = [*MAVINS, "run", "--master", f"udpin:127.0.0.1:{self.port}", "-o", str(self.nav_path), *options]
-        with open(self.log_path, "w") as log:
-            self.proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=ENV, cwd=tmp)
-        wait_for_line(self.log_path, "ready: listening on", self.proc)
-        self.feed = Feed(self.port)
-
-    def mav(self, sysid: int = 1, compid: int = 1) -> mavlink.MAVLink:
-        return mavlink.MAVLink(self.feed, srcSystem=sysid, srcComponent=compid)
-
-    def stop(self) -> Result:
-        """Wait until the service has read every datagram, stop it (SIGINT) and collect."""
-        try:
-            wait_until_read(self.port, self.proc)
-            self.proc.send_signal(signal.SIGINT)
-            self.proc.wait(EVENT_TIMEOUT_S)
-        finally:
-            if self.proc.poll() is None:
-                self.proc.kill()
-                self.proc.wait(10)
-            self.feed.sock.close()
-        log = self.log_path.read_text(errors="replace")
-        assert self.proc.returncode == 0 and "Traceback" not in log, log
-        nav = np.loadtxt(self.nav_path, delimiter=",", skiprows=1, ndmin=2)
-        return Result(log, summary(log), nav)
+Service = ServiceProcess  # support.py: `mavins run` fed over UDP
 
 
 def send_rest(mav: mavlink.MAVLink, board: Board, t0_us: int, seconds: float, rate: float = 100.0) -> int:

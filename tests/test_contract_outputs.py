@@ -48,7 +48,7 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
 
 from support import (  # noqa: E402
-    ENV, EVENT_TIMEOUT_S, MAVINS, free_udp_port, roomy, summary, wait_for_line, wait_for_room, wait_until_read,
+    ENV, Feed, EVENT_TIMEOUT_S, MAVINS, free_udp_port, roomy, summary, wait_for_line, wait_until_read,
 )
 
 # --- typed WGS-84 (NIMA TR8350.2, docs/conventions.md) -------------------------------------
@@ -119,31 +119,6 @@ def quat_of(roll: float, pitch: float, yaw: float) -> np.ndarray:
                               math.cos(yaw / 2), math.sin(yaw / 2))
     return np.array([cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
                      cr * cp * sy - sr * sp * cy])
-
-
-FEED_ROOM = 4096  # bytes the kernel may hold unread for the service (about 4 small datagrams, by its accounting)
-
-
-# --- the service as a subprocess fed over UDP ---------------------------------------------------
-class Feed:
-    """File-like sink for a pymavlink encoder: one datagram per frame to the service, paced so the
-    service's socket never holds more than a few datagrams unread (support.wait_for_room with a
-    4 KiB limit, checked every 4 frames). Every sample must be navigated for the closed form to
-    hold, and the service skips input that waited over 0.25 s once it keeps finding such input
-    for 2 s (docs/reliability.md): with at most ~8 datagrams ahead of any one, even a slow service
-    (ms per sample) reads each long before that, so no sample is ever shed."""
-
-    def __init__(self, port: int) -> None:
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.bind(("127.0.0.1", 0))
-        self.dest = ("127.0.0.1", port)
-        self.n = 0
-
-    def write(self, buf: bytes) -> None:
-        if self.n % 4 == 3:
-            wait_for_room(self.dest[1], FEED_ROOM)
-        self.sock.sendto(buf, self.dest)
-        self.n += 1
 
 
 class Listener:

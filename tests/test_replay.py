@@ -25,51 +25,21 @@ room over what was measured (max 1.95 deg, docs/service.md).
 from __future__ import annotations
 
 import gzip
-import os
 import signal
-import socket
 import subprocess
-import sys
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from support import EVENT_TIMEOUT_S, READY_TIMEOUT_S, wait_until_read
+from support import ENV, EVENT_TIMEOUT_S, MAVINS, REPO, free_udp_port, mavins, wait_for_line, wait_until_read
 
-REPO = Path(__file__).resolve().parents[1]
 PX4 = REPO / "data" / "px4-sample"
-MAVINS = [str(Path(sys.executable).parent / "mavins")] if (Path(sys.executable).parent / "mavins").is_file() \
-    else [sys.executable, "-m", "mavins.cli"]
-ENV = {**os.environ, "MAVLINK20": "1", "PYTHONUNBUFFERED": "1"}
 
 START = ("47.397742", "8.545594", "488.0")  # sim/scenarios/flight.toml [start]
 PX4_ALIGN_S = 2.0
 PX4_LIMIT_DEG = 3.0
 PX4_NO_BIAS_MIN_DEG = 10.0  # without the bias estimate: 0.21 deg/s over 67 s is ~14 deg
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-def wait_for_line(path: Path, text: str, proc: subprocess.Popen, timeout: float = READY_TIMEOUT_S) -> None:
-    """``mavins run`` prints "listening on" once its kernels are loaded (compiled after a core change)."""
-    t_end = time.monotonic() + timeout
-    while time.monotonic() < t_end:
-        if text in path.read_text(errors="replace"):
-            return
-        if proc.poll() is not None:
-            raise AssertionError(f"exited ({proc.returncode}) before {text!r}:\n{path.read_text()}")
-        time.sleep(0.05)
-    raise AssertionError(f"no {text!r} within {timeout} s:\n{path.read_text()}")
-
-
-def mavins(*args: str, cwd: Path, timeout: float = READY_TIMEOUT_S) -> subprocess.CompletedProcess:
-    return subprocess.run([*MAVINS, *args], cwd=cwd, env=ENV, capture_output=True, text=True, timeout=timeout)
 
 
 # -- 1. replay equals live -----------------------------------------------------------

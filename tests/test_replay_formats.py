@@ -91,6 +91,10 @@ def test_config_file_options_and_command_line_wins(tmp_path: Path) -> None:
     assert res.returncode == 0, res.stderr
     # the command line wins over the file's rate
     assert_crossings(np.loadtxt(tmp_path / "b.csv", delimiter=",", skiprows=1)[:, 0], 25.0, t_end=run.t[-1])
+    # a typed value equal to the default still wins over the file (50 is --rate's default)
+    res = _mavins("replay", path, "-o", tmp_path / "d.csv", "--config", cfg, "--rate=50")
+    assert res.returncode == 0, res.stderr
+    assert_crossings(np.loadtxt(tmp_path / "d.csv", delimiter=",", skiprows=1)[:, 0], 50.0, t_end=run.t[-1])
     cfg.write_text("speed_of_light = 3\n")
     res = _mavins("replay", path, "-o", tmp_path / "c.csv", "--config", cfg)
     assert res.returncode == 2 and "unknown option 'speed_of_light'" in res.stderr
