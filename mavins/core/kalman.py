@@ -55,7 +55,7 @@ from .errmodel import (
     matmul_bt,
 )
 from .jit import kernel
-from .rotation import mat_vec, quat_mul, quat_to_dcm, rotvec_to_dcm, rotvec_to_quat, wrap_pi
+from .rotation import mat3_mul_s, mat_vec, quat_mul_s, quat_to_dcm_s, rotvec_to_dcm_s, rotvec_to_quat_s, wrap_pi
 
 B_BG = 0
 B_BA = 3
@@ -189,27 +189,20 @@ def feedback(s: np.ndarray, cfg: np.ndarray, bias: np.ndarray, x: np.ndarray) ->
     ``h <- h + dp_D``, and the latitude/longitude kept beside C_n^e
     refreshed (strapdown.sync_position); biases ``bias -= x[X_BG:]``.
     """
-    q = quat_mul(rotvec_to_quat(-x[X_PHI : X_PHI + 3]), s[sd.S_Q : sd.S_Q + 4])
-    qn = np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    for i in range(4):
-        s[sd.S_Q + i] = q[i] / qn
-    s[sd.S_C : sd.S_C + 9] = quat_to_dcm(s[sd.S_Q : sd.S_Q + 4]).ravel()
+    q0, q1, q2, q3 = quat_mul_s(rotvec_to_quat_s(-x[X_PHI], -x[X_PHI + 1], -x[X_PHI + 2]),
+                                (s[sd.S_Q], s[sd.S_Q + 1], s[sd.S_Q + 2], s[sd.S_Q + 3]))
+    qn = np.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+    q0, q1, q2, q3 = q0 / qn, q1 / qn, q2 / qn, q3 / qn
+    s[sd.S_Q], s[sd.S_Q + 1], s[sd.S_Q + 2], s[sd.S_Q + 3] = q0, q1, q2, q3
+    sd._put9(s, sd.S_C, quat_to_dcm_s((q0, q1, q2, q3)))
     for i in range(3):
         s[sd.S_V + i] -= x[X_DV + i]
         s[sd.S_VP + i] -= x[X_DV + i]
     if cfg[sd.CFG_EARTH] > 0.5:
         lat, lon, h = sd.position(s, cfg)
-        r_n, r_e = earth.radii(lat)
-        dn = -x[X_DP]
-        de = -x[X_DP + 1]
-        xi = np.array([de / (r_e + h), -dn / (r_n + h), -de * np.tan(lat) / (r_e + h)])
-        cne = s[sd.S_CNE : sd.S_CNE + 9].reshape(3, 3)
-        new = np.empty((3, 3))
-        rot = rotvec_to_dcm(xi)
-        for i in range(3):
-            for j in range(3):
-                new[i, j] = cne[i, 0] * rot[0, j] + cne[i, 1] * rot[1, j] + cne[i, 2] * rot[2, j]
-        s[sd.S_CNE : sd.S_CNE + 9] = new.ravel()
+        # the transport rotation of the displacement (-dp_N, -dp_E), as strapdown._position_step moves C_n^e
+        xn, xe, xd = earth.transport_rate_s(lat, h, -x[X_DP], -x[X_DP + 1])
+        sd._put9(s, sd.S_CNE, mat3_mul_s(sd._get9(s, sd.S_CNE), rotvec_to_dcm_s(xn, xe, xd)))
     else:
         for i in range(3):
             s[sd.S_PF + i] -= x[X_DP + i]
