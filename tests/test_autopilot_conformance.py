@@ -249,3 +249,62 @@ def test_realignment_increments_reset_counter_once(tmp_path: Path) -> None:
     assert odo[k].time_usec < odo[k - 1].time_usec and odo[k].time_usec >= 2_000_000
     est = got.of("ESTIMATOR_STATUS")
     assert est and est[-1].flags & mavlink.ESTIMATOR_ATTITUDE
+
+
+def test_origin_system_time_and_ned_frame(tmp_path: Path) -> None:
+    """``--set-origin``: SET_GPS_GLOBAL_ORIGIN once, to the vehicle, with the origin (AMSL mm);
+    SYSTEM_TIME once a GPS_RAW_INT carries UNIX time, equal to that time plus the sensor time
+    elapsed; ``--odometry-frame ned``: ODOMETRY in MAV_FRAME_LOCAL_NED."""
+    from mavins.engine import EngineConfig
+    from mavins.link.ingest import IngestConfig
+    from mavins.link.publish import PublishConfig
+    from mavins.service import Service, ServiceConfig
+
+    client = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    client.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
+    client.bind(("127.0.0.1", 0))
+    port = free_udp_port()
+    geoid = 47.5
+    svc = Service(EngineConfig(lat=47.0, lon=8.0, alt=400.0, heading=30.0, align=1.0, rate=10.0), IngestConfig(),
+                  ServiceConfig(master=f"udpin:127.0.0.1:{port}", outs=[f"udpout:127.0.0.1:{client.getsockname()[1]}"],
+                                publish=PublishConfig(geoid_height=geoid, set_origin=True,
+                                                      odometry_frame=mavlink.MAV_FRAME_LOCAL_NED)))
+    got, stop_rx, stop_svc = Received(), threading.Event(), threading.Event()
+    rx = threading.Thread(target=_listen, args=(client, got, stop_rx), daemon=True)
+    rx.start()
+    runner = threading.Thread(target=svc.run, args=(stop_svc,), daemon=True)
+    runner.start()
+    mav = mavlink.MAVLink(None, srcSystem=7, srcComponent=1)
+    utc0_us = 1_764_000_000_000_000  # 2025-11-24, UNIX microseconds
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+        for i in range(800):  # 4 s at 200 Hz; a GPS_RAW_INT stamped in UTC at every 100th sample
+            t_us = 1_000_000 + 5000 * i
+            m = mavlink.MAVLink_highres_imu_message(t_us, 0.0, 0.0, -9.806, 0.0, 0.0, 0.0,
+                                                    0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 20.0, 0b111111, 0)
+            tx.sendto(m.pack(mav), ("127.0.0.1", port))
+            if i % 100 == 50:
+                g = mavlink.MAVLink_gps_raw_int_message(utc0_us + t_us, 3, 470000000, 80000000,
+                                                        400000 - int(geoid * 1000), 80, 120, 0, 0, 12, 400000,
+                                                        500, 800, 50, 100, 0)  # alt AMSL, alt_ellipsoid
+                tx.sendto(g.pack(mav), ("127.0.0.1", port))
+            if i % 50 == 49:
+                threading.Event().wait(0.01)
+    for _ in range(300):
+        if any(m.time_usec >= 4_900_000 for m in got.of("ODOMETRY")):
+            break
+        threading.Event().wait(0.05)
+    stop_svc.set()
+    runner.join(30)
+    stop_rx.set()
+    rx.join(5)
+    client.close()
+    origin = got.of("SET_GPS_GLOBAL_ORIGIN")
+    assert len(origin) == 1
+    o = origin[0]
+    assert (o.target_system, o.latitude, o.longitude) == (7, 470000000, 80000000)
+    assert o.altitude == round((400.0 - geoid) * 1000)  # AMSL mm
+    times = got.of("SYSTEM_TIME")
+    assert times
+    for m in times:  # UTC of the solution = UTC of the fixes' clock at the sensor time it carries
+        assert abs(m.time_unix_usec - (utc0_us + m.time_boot_ms * 1000)) <= 1000
+    assert got.of("ODOMETRY") and all(m.frame_id == mavlink.MAV_FRAME_LOCAL_NED for m in got.of("ODOMETRY"))
