@@ -181,14 +181,11 @@ class LiveFilter:
         tk = sd.state_time(s)
         late = max(0.0, tk - t_m)
         aided.flush_propagation(s, cfg, self.spec, self.P, self.acc)
-        gate = self.settings.gate
         if kind == "gnss":
             lat, lon, h, vel, sig_h, sig_v, sig_vel = args
             lat0, lon0, _ = sd.position(s, cfg)
-            nu, H, R = kalman.gnss_position(s, cfg, lat, lon, h, self.lever, late, sig_h, sig_v)
-            nis, ratio, ok = kalman.apply_update(s, cfg, self.bias, self.P, H, nu, R, gate)
-            self._count("gnss_pos", ratio, ok)
-            self.ratios["pos"] = self.ratios["hgt"] = ratio * ratio
+            ok = self._update(s, cfg, "gnss_pos", ("pos", "hgt"),
+                              kalman.gnss_position(s, cfg, lat, lon, h, self.lever, late, sig_h, sig_v))
             if ok:
                 lat1, lon1, _ = sd.position(s, cfg)
                 if math.hypot(*north_east_error(lat1, lon1, lat0, lon0)) > JUMP_M:
@@ -200,34 +197,30 @@ class LiveFilter:
                 self.last_pos_t = self.last_hgt_t = t_m
             self.glitch = not ok
             if vel is not None:
-                nu, H, R = kalman.gnss_velocity(s, np.asarray(vel, dtype=float), self._w_ib, self.lever, late,
-                                                max(tk - self.sums[6], 1e-3), sig_vel)
-                nis, ratio, ok = kalman.apply_update(s, cfg, self.bias, self.P, H, nu, R, gate)
-                self._count("gnss_vel", ratio, ok)
-                self.ratios["vel"] = ratio * ratio
+                self._update(s, cfg, "gnss_vel", ("vel",), kalman.gnss_velocity(
+                    s, np.asarray(vel, dtype=float), self._w_ib, self.lever, late, max(tk - self.sums[6], 1e-3),
+                    sig_vel))
         elif kind == "baro":
             h, sigma = args
-            nu, H, R = kalman.baro_height(s, self.bias, h, late, sigma)
-            nis, ratio, ok = kalman.apply_update(s, cfg, self.bias, self.P, H, nu, R, gate)
-            self._count("baro", ratio, ok)
-            self.ratios["hgt"] = ratio * ratio
-            if ok:
+            if self._update(s, cfg, "baro", ("hgt",), kalman.baro_height(s, self.bias, h, late, sigma)):
                 self.last_hgt_t = t_m
         elif kind == "mag":
             (m_b,) = args
-            nu, H, R = kalman.mag_heading(s, np.asarray(m_b, dtype=float), math.radians(self.settings.declination),
-                                          math.radians(self.settings.sigma_mag))
-            nis, ratio, ok = kalman.apply_update(s, cfg, self.bias, self.P, H, nu, R, gate)
-            self._count("mag", ratio, ok)
-            self.ratios["mag"] = ratio * ratio
+            self._update(s, cfg, "mag", ("mag",), kalman.mag_heading(
+                s, np.asarray(m_b, dtype=float), math.radians(self.settings.declination),
+                math.radians(self.settings.sigma_mag)))
         elif kind == "zupt":
-            nu, H, R = kalman.zupt(s, self.settings.sigma_zupt)
-            nis, ratio, ok = kalman.apply_update(s, cfg, self.bias, self.P, H, nu, R, gate)
-            self._count("zupt", ratio, ok)
-            self.ratios["vel"] = ratio * ratio
+            self._update(s, cfg, "zupt", ("vel",), kalman.zupt(s, self.settings.sigma_zupt))
 
-    def _count(self, kind: str, ratio: float, ok: bool) -> None:
+    def _update(self, s: np.ndarray, cfg: np.ndarray, kind: str, ratio_keys: tuple[str, ...],
+                model: tuple[np.ndarray, np.ndarray, np.ndarray]) -> bool:
+        """Apply one measurement model (nu, H, R) with the gate, count it, keep its test ratio."""
+        nu, H, R = model
+        _, ratio, ok = kalman.apply_update(s, cfg, self.bias, self.P, H, nu, R, self.settings.gate)
         self.counters[f"{kind}_{'accepted' if ok else 'rejected'}"] += 1
+        for key in ratio_keys:
+            self.ratios[key] = ratio * ratio
+        return bool(ok)
 
     def tick(self, t: float) -> None:
         """Bookkeeping at an output: GNSS loss after GNSS_LOST_S without an accepted fix."""

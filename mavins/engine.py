@@ -260,10 +260,10 @@ class Engine:
         s = self._s
         flt = self.filter
         r = flt.push(s, self._kcfg, smp.t, smp.gyro, smp.accel)  # type: ignore[arg-type]
-        bg = flt.gyro_bias
-        self._gyro_last = (smp.gyro[0] - bg[0], smp.gyro[1] - bg[1], smp.gyro[2] - bg[2])
         if r != 1:
             return None
+        bg = flt.gyro_bias  # the body rate of the update's last sample, bias removed (published, ZUPT)
+        self._gyro_last = (smp.gyro[0] - bg[0], smp.gyro[1] - bg[1], smp.gyro[2] - bg[2])
         self._aid_from_sample(smp)
         t = sd.state_time(s)  # type: ignore[arg-type]
         flt.tick(t)

@@ -30,12 +30,14 @@ import subprocess
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 import pytest
 
 from support import ENV, MAVINS, free_udp_port, wait_for_line
 from mavins.link.mavlink import mavlink
+from mavins.link.publish import PublishConfig
 
 DURATION_S = 45.0
 WINDOW_S = 20.0  # the last 20 s
@@ -117,6 +119,17 @@ def _per_second(msgs: list, t_end: float, stamp: str = "time_usec") -> list[int]
     return [int(np.sum((t > a) & (t <= a + 1.0))) for a in starts]
 
 
+def _window(got: Received, log: str, name: str, per_second: int) -> list:
+    """The messages ``name`` of the last WINDOW_S of sensor time, after checking that at least
+    ``per_second`` arrived in each whole second of it."""
+    msgs = got.of(name)
+    assert msgs, log
+    t_end = max(m.time_usec for m in msgs) * 1e-6
+    last = _last(msgs, t_end)
+    assert min(_per_second(last, t_end)) >= per_second, name
+    return last
+
+
 @pytest.fixture(scope="module")
 def aided(tmp_path_factory: pytest.TempPathFactory) -> tuple[Received, str]:
     return _run(tmp_path_factory.mktemp("aided"), "--gps-input")
@@ -129,11 +142,7 @@ def free(tmp_path_factory: pytest.TempPathFactory) -> tuple[Received, str]:
 
 def test_odometry_is_what_ekf2_and_ekf3_fuse(aided: tuple[Received, str]) -> None:
     got, log = aided
-    odo = got.of("ODOMETRY")
-    assert odo, log
-    t_end = max(m.time_usec for m in odo) * 1e-6
-    last = _last(odo, t_end)
-    assert min(_per_second(last, t_end)) >= 4
+    last = _window(got, log, "ODOMETRY", 4)
     for m in last:
         assert m.frame_id == mavlink.MAV_FRAME_LOCAL_FRD and m.child_frame_id == mavlink.MAV_FRAME_BODY_FRD
         assert m.estimator_type == mavlink.MAV_ESTIMATOR_TYPE_VIO  # PX4 drops GPS/GPS_INS
@@ -146,11 +155,7 @@ def test_odometry_is_what_ekf2_and_ekf3_fuse(aided: tuple[Received, str]) -> Non
 
 def test_estimator_status_and_ekf_status_report(aided: tuple[Received, str]) -> None:
     got, log = aided
-    est = got.of("ESTIMATOR_STATUS")
-    assert est, log
-    t_end = max(m.time_usec for m in est) * 1e-6
-    last = _last(est, t_end)
-    assert min(_per_second(last, t_end)) >= 1
+    last = _window(got, log, "ESTIMATOR_STATUS", 1)
     need = (mavlink.ESTIMATOR_ATTITUDE | mavlink.ESTIMATOR_VELOCITY_HORIZ | mavlink.ESTIMATOR_VELOCITY_VERT
             | mavlink.ESTIMATOR_POS_HORIZ_ABS)
     for m in last:
@@ -169,11 +174,7 @@ def test_estimator_status_and_ekf_status_report(aided: tuple[Received, str]) -> 
 
 def test_gps_input_carries_the_solution(aided: tuple[Received, str]) -> None:
     got, log = aided
-    gps = got.of("GPS_INPUT")
-    assert gps, log
-    t_end = max(m.time_usec for m in gps) * 1e-6
-    last = _last(gps, t_end)
-    assert min(_per_second(last, t_end)) >= 5
+    last = _window(got, log, "GPS_INPUT", 5)
     for m in last:
         assert m.fix_type == 3 and m.gps_id == 0
         assert 0.0 < m.horiz_accuracy <= 5.0 and 0.0 < m.vert_accuracy <= 5.0
@@ -203,10 +204,15 @@ def test_free_inertial_is_flagged_and_its_uncertainty_grows(free: tuple[Received
     assert not got.of("GPS_INPUT")  # only with --gps-input
 
 
-def test_realignment_increments_reset_counter_once(tmp_path: Path) -> None:
-    """An autopilot restart (sensor time back to boot) re-aligns: ODOMETRY's reset_counter grows by
-    exactly one (PX4 and ArduPilot reset their fusion on a change), nothing is published while
-    re-aligning, and the estimator flags come back with attitude."""
+def _rest_imu(mav: mavlink.MAVLink, t_us: int) -> bytes:
+    """A HIGHRES_IMU frame of a level board at rest."""
+    return bytes(mavlink.MAVLink_highres_imu_message(t_us, 0.0, 0.0, -9.806, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+                                                     0.0, 0.0, 0.0, 20.0, 0b111111, 0).pack(mav))
+
+
+def _serve_in_process(publish: PublishConfig, frames: list[bytes], done: Callable[[Received], bool]) -> Received:
+    """An in-process service (position typed, heading 30 deg, 1 s alignment, 10 Hz output) on
+    127.0.0.1, fed ``frames`` (paced: 10 ms every 50), until ``done`` holds for what came back."""
     from mavins.engine import EngineConfig
     from mavins.link.ingest import IngestConfig
     from mavins.service import Service, ServiceConfig
@@ -216,23 +222,20 @@ def test_realignment_increments_reset_counter_once(tmp_path: Path) -> None:
     client.bind(("127.0.0.1", 0))
     port = free_udp_port()
     svc = Service(EngineConfig(lat=47.0, lon=8.0, alt=400.0, heading=30.0, align=1.0, rate=10.0), IngestConfig(),
-                  ServiceConfig(master=f"udpin:127.0.0.1:{port}", outs=[f"udpout:127.0.0.1:{client.getsockname()[1]}"]))
+                  ServiceConfig(master=f"udpin:127.0.0.1:{port}", outs=[f"udpout:127.0.0.1:{client.getsockname()[1]}"],
+                                publish=publish))
     got, stop_rx, stop_svc = Received(), threading.Event(), threading.Event()
     rx = threading.Thread(target=_listen, args=(client, got, stop_rx), daemon=True)
     rx.start()
     runner = threading.Thread(target=svc.run, args=(stop_svc,), daemon=True)
     runner.start()
-    mav = mavlink.MAVLink(None, srcSystem=7, srcComponent=1)
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
-        for boot in range(2):  # 3 s at 200 Hz, then the autopilot restarts and sends 3 s again
-            for i in range(600):
-                m = mavlink.MAVLink_highres_imu_message(1_000_000 + 5000 * i, 0.0, 0.0, -9.806, 0.0, 0.0, 0.0,
-                                                        0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 20.0, 0b111111, 0)
-                tx.sendto(m.pack(mav), ("127.0.0.1", port))
-                if i % 50 == 49:
-                    threading.Event().wait(0.01)
-    for _ in range(300):  # until both runs' last output set arrived (sensor time 3.995 s twice)
-        if sum(1 for m in got.of("ODOMETRY") if m.time_usec >= 3_900_000) >= 2:
+        for i, f in enumerate(frames):
+            tx.sendto(f, ("127.0.0.1", port))
+            if i % 50 == 49:
+                threading.Event().wait(0.01)
+    for _ in range(600):  # wait on the event, not on a duration
+        if done(got):
             break
         threading.Event().wait(0.05)
     stop_svc.set()
@@ -240,6 +243,17 @@ def test_realignment_increments_reset_counter_once(tmp_path: Path) -> None:
     stop_rx.set()
     rx.join(5)
     client.close()
+    return got
+
+
+def test_realignment_increments_reset_counter_once(tmp_path: Path) -> None:
+    """An autopilot restart (sensor time back to boot) re-aligns: ODOMETRY's reset_counter grows by
+    exactly one (PX4 and ArduPilot reset their fusion on a change), nothing is published while
+    re-aligning, and the estimator flags come back with attitude."""
+    mav = mavlink.MAVLink(None, srcSystem=7, srcComponent=1)
+    frames = [_rest_imu(mav, 1_000_000 + 5000 * i) for _ in range(2) for i in range(600)]  # 3 s, restart, 3 s
+    got = _serve_in_process(PublishConfig(), frames,
+                            lambda g: sum(1 for m in g.of("ODOMETRY") if m.time_usec >= 3_900_000) >= 2)
     odo = got.of("ODOMETRY")
     counters = [m.reset_counter for m in odo]
     changes = [i for i in range(1, len(counters)) if counters[i] != counters[i - 1]]
@@ -255,49 +269,20 @@ def test_origin_system_time_and_ned_frame(tmp_path: Path) -> None:
     """``--set-origin``: SET_GPS_GLOBAL_ORIGIN once, to the vehicle, with the origin (AMSL mm);
     SYSTEM_TIME once a GPS_RAW_INT carries UNIX time, equal to that time plus the sensor time
     elapsed; ``--odometry-frame ned``: ODOMETRY in MAV_FRAME_LOCAL_NED."""
-    from mavins.engine import EngineConfig
-    from mavins.link.ingest import IngestConfig
-    from mavins.link.publish import PublishConfig
-    from mavins.service import Service, ServiceConfig
-
-    client = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    client.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
-    client.bind(("127.0.0.1", 0))
-    port = free_udp_port()
     geoid = 47.5
-    svc = Service(EngineConfig(lat=47.0, lon=8.0, alt=400.0, heading=30.0, align=1.0, rate=10.0), IngestConfig(),
-                  ServiceConfig(master=f"udpin:127.0.0.1:{port}", outs=[f"udpout:127.0.0.1:{client.getsockname()[1]}"],
-                                publish=PublishConfig(geoid_height=geoid, set_origin=True,
-                                                      odometry_frame=mavlink.MAV_FRAME_LOCAL_NED)))
-    got, stop_rx, stop_svc = Received(), threading.Event(), threading.Event()
-    rx = threading.Thread(target=_listen, args=(client, got, stop_rx), daemon=True)
-    rx.start()
-    runner = threading.Thread(target=svc.run, args=(stop_svc,), daemon=True)
-    runner.start()
     mav = mavlink.MAVLink(None, srcSystem=7, srcComponent=1)
     utc0_us = 1_764_000_000_000_000  # 2025-11-24, UNIX microseconds
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
-        for i in range(800):  # 4 s at 200 Hz; a GPS_RAW_INT stamped in UTC at every 100th sample
-            t_us = 1_000_000 + 5000 * i
-            m = mavlink.MAVLink_highres_imu_message(t_us, 0.0, 0.0, -9.806, 0.0, 0.0, 0.0,
-                                                    0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 20.0, 0b111111, 0)
-            tx.sendto(m.pack(mav), ("127.0.0.1", port))
-            if i % 100 == 50:
-                g = mavlink.MAVLink_gps_raw_int_message(utc0_us + t_us, 3, 470000000, 80000000,
-                                                        400000 - int(geoid * 1000), 80, 120, 0, 0, 12, 400000,
-                                                        500, 800, 50, 100, 0)  # alt AMSL, alt_ellipsoid
-                tx.sendto(g.pack(mav), ("127.0.0.1", port))
-            if i % 50 == 49:
-                threading.Event().wait(0.01)
-    for _ in range(300):
-        if any(m.time_usec >= 4_900_000 for m in got.of("ODOMETRY")):
-            break
-        threading.Event().wait(0.05)
-    stop_svc.set()
-    runner.join(30)
-    stop_rx.set()
-    rx.join(5)
-    client.close()
+    frames = []
+    for i in range(800):  # 4 s at 200 Hz; a GPS_RAW_INT stamped in UTC at every 100th sample
+        t_us = 1_000_000 + 5000 * i
+        frames.append(_rest_imu(mav, t_us))
+        if i % 100 == 50:
+            frames.append(bytes(mavlink.MAVLink_gps_raw_int_message(
+                utc0_us + t_us, 3, 470000000, 80000000, 400000 - int(geoid * 1000), 80, 120, 0, 0, 12, 400000,
+                500, 800, 50, 100, 0).pack(mav)))  # alt AMSL, alt_ellipsoid
+    got = _serve_in_process(PublishConfig(geoid_height=geoid, set_origin=True,
+                                          odometry_frame=mavlink.MAV_FRAME_LOCAL_NED), frames,
+                            lambda g: any(m.time_usec >= 4_900_000 for m in g.of("ODOMETRY")))
     origin = got.of("SET_GPS_GLOBAL_ORIGIN")
     assert len(origin) == 1
     o = origin[0]

@@ -525,19 +525,20 @@ def test_successful_writers_replace_in_one_step_and_leave_no_temporary(world: Pa
     assert not hidden, f"temporary files left behind: {hidden}"
 
 
-def test_review_without_a_viewer_writes_nothing(world: Path) -> None:
-    """A valid recording on a machine without Xvfb/lavapipe: exit 1 (viewer), and no PNG, not even an empty one."""
+def test_review_without_a_viewer_writes_nothing(world: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A valid recording where the viewer cannot be found (an empty PATH hides Xvfb, installed or
+    not): exit 1 (viewer), one line, and no PNG, not even an empty one or a temporary file."""
     from mavins.record.review import ViewerUnavailable, check_dependencies
 
-    try:
+    empty = world.parent / "empty-path"
+    empty.mkdir()
+    monkeypatch.setenv("PATH", str(empty))
+    with pytest.raises(ViewerUnavailable):
         check_dependencies()
-    except ViewerUnavailable:
-        before = snapshot(world)
-        code, stderr = run_cli("review", "valid.rrd", "--screenshot", "x.png")
-        assert code == 1 and len(error_lines(stderr)) == 1 and "Traceback" not in stderr, stderr
-        assert snapshot(world) == before
-    else:
-        pytest.skip("the headless viewer is installed here (tests/test_record.py renders)")
+    before = snapshot(world)
+    code, stderr = run_cli("review", "valid.rrd", "--screenshot", "x.png")
+    assert code == 1 and len(error_lines(stderr)) == 1 and "Traceback" not in stderr, stderr
+    assert snapshot(world) == before
 
 
 # -- chunked nav: bit-identical to the whole-array run, errors still name their line -------------

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from support import ENV, MAVINS, free_udp_port, mavins, summary, wait_for_line, wait_for_room, wait_until_read
+from support import ENV, MAVINS, free_udp_port, mavins, summary, tlog_frames, wait_for_line, wait_for_room, wait_until_read
 from mavins.link.mavlink import mavlink
 
 RATE_HZ = 300.0  # messages per second, paced in real time (issue: 300-1000 for 60 s)
@@ -40,17 +40,6 @@ def _frames(n: int) -> list[bytes]:
                                                   0.2, 0.0, 0.4, 0.0, 0.0, 0.0, 20.0, 0b1000111111111, 0)
         out.append(bytes(msg.pack(mav)))
     return out
-
-
-def _tlog_count(path: Path) -> int:
-    """Messages in a tlog (8-byte timestamp, then one MAVLink 2 frame each)."""
-    data, n, i = path.read_bytes(), 0, 0
-    while i + 8 < len(data):
-        assert data[i + 8] == 0xFD, f"not a MAVLink 2 frame at byte {i + 8}"
-        i += 8 + 12 + data[i + 9] + (13 if data[i + 10] & 1 else 0)
-        n += 1
-    assert i == len(data), "the tlog ends inside a frame"
-    return n
 
 
 def test_cold_start_then_paced_input_loses_nothing(tmp_path: Path) -> None:
@@ -92,7 +81,7 @@ def test_cold_start_then_paced_input_loses_nothing(tmp_path: Path) -> None:
     assert int(s["kernel_dropped"]) == 0, text
     assert int(s["flood_skipped"]) == 0 and int(s["flood_dropped"]) == 0, text
     assert int(s["imu_accepted"]) == len(frames), text
-    assert _tlog_count(tlog) == len(frames)
+    assert tlog_frames(tlog) == len(frames)
     # one row per 1/25 s of sensor time from the end of the alignment to the last sample
     rows = live.read_text().splitlines()[1:]
     t_last = float(rows[-1].split(",")[0])
