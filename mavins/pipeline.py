@@ -29,6 +29,8 @@ GNSS_SIGMA_H = 2.5  # m: horizontal 1-sigma when a fix gives no accuracy (docs/c
 GNSS_SIGMA_V = 5.0  # m
 GNSS_SIGMA_VEL = 0.3  # m/s
 BARO_SIGMA_M = 0.5  # m: barometric height 1-sigma (docs/conventions.md baro default)
+GNSS_MAX_SIGMA = 50.0  # m: a fix claiming a worse 1-sigma accuracy is rejected (docs/filter.md)
+GPS_FIX_3D, GPS_FIX_PPP = 3, 8  # GPS_FIX_TYPE: 3D fix .. PPP are fixes; other values carry no fix
 
 
 @dataclass
@@ -68,8 +70,9 @@ class Pipeline:
             return None
         if name in GNSS_MESSAGES:
             fix = gnss_fix(msg, self.engine_cfg.geoid_height)
-            if fix is None:
-                self.counters["gnss_no_fix"] += 1
+            why = "no_fix" if fix is None else gnss_invalid(fix)
+            if why is not None:
+                self.counters[f"gnss_{why}"] += 1
             else:
                 t, lat, lon, h, vel, sig_h, sig_v, sig_vel = fix
                 self.engine.on_gnss(self._on_imu_clock(t), lat, lon, h, vel, sig_h, sig_v, sig_vel, name)
@@ -150,7 +153,7 @@ def gnss_fix(msg: object, geoid_height: float) -> tuple[float | None, float, flo
     else AMSL plus ``geoid_height``. Accuracies from the message when given, else the defaults."""
     m = msg
     name = m.get_type()  # type: ignore[attr-defined]
-    if m.fix_type < 3 or not (m.lat or m.lon):  # type: ignore[attr-defined]
+    if not GPS_FIX_3D <= m.fix_type <= GPS_FIX_PPP or not (m.lat or m.lon):  # type: ignore[attr-defined]
         return None
     t = m.time_usec * 1e-6 if getattr(m, "time_usec", 0) else None  # type: ignore[attr-defined]
     vel = None
@@ -177,6 +180,18 @@ def gnss_fix(msg: object, geoid_height: float) -> tuple[float | None, float, flo
         sig_v = m.epv / 100.0 * GNSS_SIGMA_V if 0 < m.epv < 65535 else GNSS_SIGMA_V  # type: ignore[attr-defined]
         vel = (m.vn / 100.0, m.ve / 100.0, m.vd / 100.0)  # type: ignore[attr-defined]
     return t, m.lat * 1e-7, m.lon * 1e-7, h, vel, sig_h, sig_v, sig_vel  # type: ignore[attr-defined]
+
+
+def gnss_invalid(fix: tuple) -> str | None:
+    """Why a decoded fix cannot be used (``"out_of_range"``, ``"inaccurate"``), or None: latitude
+    and longitude within their ranges, every value finite, accuracies at most GNSS_MAX_SIGMA."""
+    _, lat, lon, h, vel, sig_h, sig_v, sig_vel = fix
+    values = (lat, lon, h, sig_h, sig_v, sig_vel, *(vel or ()))
+    if not all(math.isfinite(v) for v in values) or abs(lat) > 90.0 or abs(lon) > 180.0:
+        return "out_of_range"
+    if not (0.0 < sig_h <= GNSS_MAX_SIGMA and 0.0 < sig_v <= GNSS_MAX_SIGMA and sig_vel > 0.0):
+        return "inaccurate"
+    return None
 
 
 def isa_height(press_hpa: float) -> float:
