@@ -24,95 +24,8 @@ the interval is taken with the trapezoidal rule on the boundary states.  After
 that the increments pass a residual-carrying quantiser, the timestamps get
 jitter and samples are dropped (see :func:`apply`).
 
-Grade presets (:func:`grade`)
------------------------------
-Conventions used to turn datasheet lines into model parameters:
-
-* Angle / velocity random walk: datasheet ARW/VRW, or the rate / acceleration
-  noise density (``deg/s/sqrt(Hz)`` is numerically an ARW in ``deg/sqrt(s)``).
-  Conversions: ``deg/sqrt(h) -> rad/sqrt(s)``: ``* pi/180/60``;
-  ``deg/s/sqrt(Hz) -> rad/sqrt(s)``: ``* pi/180``;
-  ``ug/sqrt(Hz) -> m/s/sqrt(s)``: ``* 9.80665e-6``;
-  ``m/s/sqrt(h) -> m/s/sqrt(s)``: ``/ 60``; ``ft/s/sqrt(h)``: ``* 0.3048/60``.
-* Bias instability ``B`` (the floor of the Allan deviation): modelled as a
-  Gauss-Markov process whose Allan-deviation peak equals ``B``, i.e.
-  ``sigma = B / GM_ADEV_PEAK_RATIO`` (``= B / 0.6174``), reached at
-  ``tau = 1.893 tau_c``.  ``deg/h -> rad/s``: ``* pi/180/3600``;
-  ``ug -> m/s^2``: ``* 9.80665e-6``.  Datasheets do not give ``tau_c``: it is
-  an assumption (row ``tau_c``).
-* Rate random walk: datasheets do not give it; it is set so that its Allan
-  line ``K sqrt(tau/3)`` meets ``B`` at ``tau = 10 tau_c``, i.e.
-  ``K = B sqrt(3 / (10 tau_c))``.
-* Turn-on bias sigma: MEMS datasheet tolerances (``+-x``) are read as 3-sigma
-  limits (sigma = x/3); Honeywell figures are quoted as 1-sigma and used as is.
-  Honeywell gives one gyro bias figure, used for both the turn-on sigma and
-  ``B``; the HG1700 1 mg accelerometer bias is used as the turn-on sigma only,
-  its in-run ``B`` is assumed.
-* Scale factor, misalignment, g-sensitivity are deterministic fields.  Each
-  preset is one representative unit: a magnitude (MEMS ``+-`` limits divided
-  by 3, typical or assumed values as they are) times a fixed sign/size
-  pattern, so runs are repeatable.
-* Quantisation is the increment LSB: for the consumer part the 16-bit rate
-  LSB times the 1 ms sample period of a 1 kHz read-out; for the ADIS16470 the
-  LSB of its 32-bit delta-angle / delta-velocity registers.
-* Jitter and drop probability describe the logging path, not the sensor;
-  they are assumptions.
-
-Sources: [MPU] InvenSense PS-MPU-6000A-00 rev 3.4 (MPU-6000/6050 product
-specification), sections 6.1 and 6.2; [ICM] TDK InvenSense DS-000176 rev 1.0
-(ICM-20602 datasheet); [ADI] Analog Devices ADIS16470 datasheet (rev C),
-table 1; [HG17] Honeywell HG1700 IMU brochure (AG58 variant); [HG99]
-Honeywell HG9900 IMU brochure (N61-1638-000-000).  Figures marked ``*`` were
-quoted from the datasheet from memory and could not be re-checked against
-the document when this table was written; ``assumed`` marks engineering
-assumptions that no datasheet states.
-
-Datasheet figures (or assumptions) per grade; ``rth`` = sqrt(hour):
-
-=================  =====================  ======================  =====================  =====================
-quantity           consumer               industrial              tactical               navigation
-=================  =====================  ======================  =====================  =====================
-reference part     ICM-20602 / MPU-6000   ADIS16470               HG1700-AG58            HG9900
-gyro ARW           4 mdps/rtHz [ICM]      0.34 deg/rth [ADI]      0.125 deg/rth [HG17]   0.002 deg/rth [HG99]
-gyro B             10 deg/h (assumed)     8 deg/h [ADI]           1 deg/h [HG17]         0.0035 deg/h [HG99]
-gyro turn-on       +-1 deg/s* [ICM]       0.1 deg/s (assumed)     1 deg/h [HG17]         0.0035 deg/h [HG99]
-gyro scale         +-1 % [ICM]            0.1 % (assumed)         150 ppm* [HG17]        5 ppm [HG99]
-gyro misalign      +-2 % cross [MPU]      0.05 deg (assumed)      0.1 mrad (assumed)     20 urad (assumed)
-gyro g-sens        0.1 deg/s/g [MPU]      0.01 deg/s/g (assumed)  0 (RLG, assumed)       0 (RLG, assumed)
-gyro LSB           16.4 LSB/dps [MPU]     2160 deg/2^31* [ADI]    assumed                assumed
-accel VRW          100 ug/rtHz [ICM]      0.037 m/s/rth* [ADI]    0.065 ft/s/rth [HG17]  10 ug/rtHz (assumed)
-accel B            0.1 mg (assumed)       13 ug [ADI]             50 ug (assumed)        25 ug [HG99]
-accel turn-on      +-25 mg* [ICM]         2 mg (assumed)          1 mg [HG17]            25 ug [HG99]
-accel scale        +-3 % [MPU]            0.1 % (assumed)         300 ppm* [HG17]        100 ppm [HG99]
-accel misalign     +-2 % cross [MPU]      0.05 deg (assumed)      0.1 mrad (assumed)     20 urad (assumed)
-accel LSB          2048 LSB/g [MPU]       400 m/s/2^31* [ADI]     assumed                assumed
-tau_c (both)       50 s (assumed)         100 s (assumed)         300 s (assumed)        3600 s (assumed)
-timestamp jitter   50 us (assumed)        10 us (assumed)         1 us (assumed)         1 us (assumed)
-drop probability   1e-4 (assumed)         1e-5 (assumed)          0                      0
-=================  =====================  ======================  =====================  =====================
-
-Resulting model values (turn-on: 1-sigma; scale, misalignment and
-g-sensitivity: magnitude before the fixed pattern; LSB at 1 kHz for consumer):
-
-=====================  ==========  ==========  ==========  ==========  =================
-model value            consumer    industrial  tactical    navigation  unit
-=====================  ==========  ==========  ==========  ==========  =================
-gyro random_walk       6.981e-5    9.890e-5    3.636e-5    5.818e-7    rad/sqrt(s)
-gyro B                 4.848e-5    3.879e-5    4.848e-6    1.697e-8    rad/s
-gyro rate random walk  3.755e-6    2.124e-6    1.533e-7    1.549e-10   rad/s/sqrt(s)
-gyro turn-on sigma     5.818e-3    1.745e-3    4.848e-6    1.697e-8    rad/s
-gyro scale factor      3333        1000        150         5           ppm
-gyro misalignment      6.667e-3    8.727e-4    1e-4        2e-5        rad
-g-sensitivity          1.780e-4    1.780e-5    0           0           rad/s per m/s^2
-gyro LSB               1.064e-6    1.756e-8    1e-7        1e-8        rad
-accel random_walk      9.807e-4    6.167e-4    3.302e-4    9.807e-5    m/s/sqrt(s)
-accel B                9.807e-4    1.275e-4    4.903e-4    2.452e-4    m/s^2
-accel rate random walk 7.596e-5    6.983e-6    1.551e-5    2.238e-6    m/s^2/sqrt(s)
-accel turn-on sigma    8.172e-2    1.961e-2    9.807e-3    2.452e-4    m/s^2
-accel scale factor     10000       1000        300         100         ppm
-accel misalignment     6.667e-3    8.727e-4    1e-4        2e-5        rad
-accel LSB              4.788e-6    1.863e-7    1e-6        1e-7        m/s
-=====================  ==========  ==========  ==========  ==========  =================
+Grade presets (:func:`grade`): the datasheet figures and how they become model
+values are in ``mavins/core/grades.py`` (shared with the filter).
 
 The ``ideal`` grade has every error set to zero: :func:`apply` then returns
 the input unchanged, bit for bit.
@@ -125,6 +38,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+from mavins.core import grades
 
 __all__ = [
     "GM_ADEV_PEAK_RATIO",
@@ -143,19 +58,9 @@ __all__ = [
 Vec3 = tuple[float, float, float]
 Mat3 = tuple[Vec3, Vec3, Vec3]
 
-GM_ADEV_PEAK_RATIO: float = 0.6173642831
-"""Peak Allan deviation of a Gauss-Markov process divided by its sigma."""
+GM_ADEV_PEAK_RATIO = grades.GM_ADEV_PEAK_RATIO
+GM_ADEV_PEAK_TAU_RATIO = grades.GM_ADEV_PEAK_TAU_RATIO
 
-GM_ADEV_PEAK_TAU_RATIO: float = 1.8926
-"""Averaging time of that peak divided by the correlation time."""
-
-_G0 = 9.80665
-_DEG = math.pi / 180.0
-_DEG_PER_H = _DEG / 3600.0
-_DEG_PER_RTH = _DEG / 60.0
-_UG = 1e-6 * _G0
-_MG = 1e-3 * _G0
-_FT = 0.3048
 _MAX_EFOLDS = 20.0
 
 _ZERO3: Vec3 = (0.0, 0.0, 0.0)
@@ -285,138 +190,33 @@ def gauss_markov_adev(sigma: float, tau_c: float, tau: ArrayLike) -> NDArray[np.
     return sigma * np.sqrt(2.0 / x * bracket)
 
 
-def _gm_sigma(bias_instability: float) -> float:
-    return bias_instability / GM_ADEV_PEAK_RATIO
-
-
-def _rrw_from_b(bias_instability: float, tau_c: float) -> float:
-    return bias_instability * math.sqrt(3.0 / (10.0 * tau_c))
-
-
 _SF_PATTERN = np.array([1.0, -0.7, 0.4])
 _MIS_PATTERN = np.array([[0.0, 1.0, -0.6], [-0.8, 0.0, 0.5], [0.3, -0.9, 0.0]])
 _GSENS_PATTERN = np.array([[1.0, 0.2, -0.1], [-0.2, 0.8, 0.1], [0.1, -0.1, 0.6]])
 
 
-def _sensor(
-    *,
-    random_walk: float,
-    bias_instability: float,
-    tau_c: float,
-    turn_on_sigma: float,
-    scale_factor_ppm: float,
-    misalignment: float,
-    quantization: float,
-) -> SensorErrorModel:
+def _sensor(f: grades.TriadFigures) -> SensorErrorModel:
+    """One representative unit of a triad: magnitudes times the fixed sign/size patterns."""
     return SensorErrorModel(
-        turn_on_bias_sigma=turn_on_sigma,
-        bias_instability_sigma=_gm_sigma(bias_instability),
-        bias_instability_tau=tau_c,
-        random_walk=random_walk,
-        rate_random_walk=_rrw_from_b(bias_instability, tau_c),
-        scale_factor_ppm=scale_factor_ppm * _SF_PATTERN,
-        misalignment=misalignment * _MIS_PATTERN,
-        quantization=quantization,
+        turn_on_bias_sigma=f.turn_on_sigma,
+        bias_instability_sigma=f.gm_sigma,
+        bias_instability_tau=f.tau_c,
+        random_walk=f.random_walk,
+        rate_random_walk=f.rate_random_walk,
+        scale_factor_ppm=f.scale_factor_ppm * _SF_PATTERN,
+        misalignment=f.misalignment * _MIS_PATTERN,
+        quantization=f.quantization,
     )
 
 
-def _consumer() -> ImuErrorModel:
-    gyro = _sensor(
-        random_walk=0.004 * _DEG,
-        bias_instability=10.0 * _DEG_PER_H,
-        tau_c=50.0,
-        turn_on_sigma=1.0 * _DEG / 3.0,
-        scale_factor_ppm=1e4 / 3.0,
-        misalignment=0.02 / 3.0,
-        quantization=_DEG / 16.4 * 1e-3,
-    )
-    accel = _sensor(
-        random_walk=100.0 * _UG,
-        bias_instability=0.1 * _MG,
-        tau_c=50.0,
-        turn_on_sigma=25.0 * _MG / 3.0,
-        scale_factor_ppm=3e4 / 3.0,
-        misalignment=0.02 / 3.0,
-        quantization=_G0 / 2048.0 * 1e-3,
-    )
-    g_sens = 0.1 * _DEG / _G0 * _GSENS_PATTERN
-    return ImuErrorModel(gyro, accel, g_sens, jitter_sigma=50e-6, drop_probability=1e-4)
+def _preset(name: str) -> ImuErrorModel:
+    f = grades.grade_figures(name)
+    g_sens = f.g_sensitivity * _GSENS_PATTERN if f.g_sensitivity else _ZERO33
+    return ImuErrorModel(_sensor(f.gyro), _sensor(f.accel), g_sens, jitter_sigma=f.jitter_sigma,
+                         drop_probability=f.drop_probability)
 
 
-def _industrial() -> ImuErrorModel:
-    gyro = _sensor(
-        random_walk=0.34 * _DEG_PER_RTH,
-        bias_instability=8.0 * _DEG_PER_H,
-        tau_c=100.0,
-        turn_on_sigma=0.1 * _DEG,
-        scale_factor_ppm=1000.0,
-        misalignment=0.05 * _DEG,
-        quantization=2160.0 * _DEG / 2.0**31,
-    )
-    accel = _sensor(
-        random_walk=0.037 / 60.0,
-        bias_instability=13.0 * _UG,
-        tau_c=100.0,
-        turn_on_sigma=2.0 * _MG,
-        scale_factor_ppm=1000.0,
-        misalignment=0.05 * _DEG,
-        quantization=400.0 / 2.0**31,
-    )
-    g_sens = 0.01 * _DEG / _G0 * _GSENS_PATTERN
-    return ImuErrorModel(gyro, accel, g_sens, jitter_sigma=10e-6, drop_probability=1e-5)
-
-
-def _tactical() -> ImuErrorModel:
-    gyro = _sensor(
-        random_walk=0.125 * _DEG_PER_RTH,
-        bias_instability=1.0 * _DEG_PER_H,
-        tau_c=300.0,
-        turn_on_sigma=1.0 * _DEG_PER_H,
-        scale_factor_ppm=150.0,
-        misalignment=1e-4,
-        quantization=1e-7,
-    )
-    accel = _sensor(
-        random_walk=0.065 * _FT / 60.0,
-        bias_instability=50.0 * _UG,
-        tau_c=300.0,
-        turn_on_sigma=1.0 * _MG,
-        scale_factor_ppm=300.0,
-        misalignment=1e-4,
-        quantization=1e-6,
-    )
-    return ImuErrorModel(gyro, accel, _ZERO33, jitter_sigma=1e-6, drop_probability=0.0)
-
-
-def _navigation() -> ImuErrorModel:
-    gyro = _sensor(
-        random_walk=0.002 * _DEG_PER_RTH,
-        bias_instability=0.0035 * _DEG_PER_H,
-        tau_c=3600.0,
-        turn_on_sigma=0.0035 * _DEG_PER_H,
-        scale_factor_ppm=5.0,
-        misalignment=20e-6,
-        quantization=1e-8,
-    )
-    accel = _sensor(
-        random_walk=10.0 * _UG,
-        bias_instability=25.0 * _UG,
-        tau_c=3600.0,
-        turn_on_sigma=25.0 * _UG,
-        scale_factor_ppm=100.0,
-        misalignment=20e-6,
-        quantization=1e-7,
-    )
-    return ImuErrorModel(gyro, accel, _ZERO33, jitter_sigma=1e-6, drop_probability=0.0)
-
-
-_BUILDERS = {
-    "ideal": ImuErrorModel,
-    "consumer": _consumer,
-    "industrial": _industrial,
-    "tactical": _tactical,
-    "navigation": _navigation,
-}
+_BUILDERS = {"ideal": ImuErrorModel, **{name: (lambda n=name: _preset(n)) for name in grades.GRADES}}
 
 GRADES: tuple[str, ...] = tuple(_BUILDERS)
 """Names accepted by :func:`grade` (parameters in the module docstring table)."""

@@ -81,12 +81,12 @@ VRW^2 (m^2/s^3), rate random walk K^2, Gauss-Markov driving noise
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Mapping
 
 import numpy as np
 
-from . import earth
+from . import earth, grades
 from .jit import kernel
 
 # --- error-state layout ---------------------------------------------------
@@ -226,43 +226,34 @@ def spec_to_keys(spec: ImuSpec) -> dict[str, float]:
     }
 
 
-GRADES = ("consumer", "industrial", "tactical", "navigation")
+GRADES = grades.GRADES
 
 
 def spec_from_grade(name: str) -> ImuSpec:
-    """ImuSpec with the figures of the simulator's grade ``name`` (sim/errors.py).
+    """ImuSpec with the figures of grade ``name`` (core/grades.py, the simulator's too).
 
-    The simulator draws ``bias = constant + turn-on + Gauss-Markov + rate
-    random walk``: the initial sigma is the turn-on sigma (the constant bias
-    of the presets is zero), the Gauss-Markov sigma and tau and the rate
-    random walk are taken as they are. Scale factor, misalignment,
+    The simulator draws ``bias = turn-on + Gauss-Markov + rate random walk``:
+    the initial sigma is the turn-on sigma, the Gauss-Markov sigma and tau and
+    the rate random walk are taken as they are. Scale factor, misalignment,
     g-sensitivity, quantisation, timestamp jitter and dropped samples are not
     in this model.
     """
-    if name not in GRADES:
-        raise ValueError(f"unknown grade {name!r}; choose one of {GRADES}")
-    from sim import errors  # the simulator is packaged with mavins; imported only here
-
-    m = errors.grade(name)
-
-    def bias0(s: "errors.SensorErrorModel") -> float:
-        return math.sqrt(s.turn_on_bias_sigma**2 + float(np.mean(np.square(s.bias))))
-
+    f = grades.grade_figures(name)
     return ImuSpec(
-        gyro_arw=m.gyro.random_walk,
-        gyro_bias=bias0(m.gyro),
-        gyro_gm=m.gyro.bias_instability_sigma,
-        gyro_tau=m.gyro.bias_instability_tau,
-        gyro_rrw=m.gyro.rate_random_walk,
-        accel_vrw=m.accel.random_walk,
-        accel_bias=bias0(m.accel),
-        accel_gm=m.accel.bias_instability_sigma,
-        accel_tau=m.accel.bias_instability_tau,
-        accel_rrw=m.accel.rate_random_walk,
+        gyro_arw=f.gyro.random_walk,
+        gyro_bias=f.gyro.turn_on_sigma,
+        gyro_gm=f.gyro.gm_sigma,
+        gyro_tau=f.gyro.tau_c,
+        gyro_rrw=f.gyro.rate_random_walk,
+        accel_vrw=f.accel.random_walk,
+        accel_bias=f.accel.turn_on_sigma,
+        accel_gm=f.accel.gm_sigma,
+        accel_tau=f.accel.tau_c,
+        accel_rrw=f.accel.rate_random_walk,
     )
 
 
-def make_spec(spec: "str | ImuSpec | Mapping[str, float]", baro_drift: float = 0.0) -> np.ndarray:
+def make_spec(spec: str | ImuSpec | Mapping[str, float], baro_drift: float = 0.0) -> np.ndarray:
     """Process-model vector from a grade name, an ImuSpec or the contract's spec keys."""
     if isinstance(spec, str):
         spec = spec_from_grade(spec)
