@@ -25,6 +25,7 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Self
 
 import numpy as np
 
@@ -288,6 +289,39 @@ def _bad_text(path: Path) -> str:
 CHUNK_BYTES = 32 << 20  # text read per chunk by TableReader (about 250,000 IMU rows)
 
 
+class _Refused(Exception):
+    """The fast reader declines a file the line-by-line reader should handle."""
+
+
+def _arrow_refused() -> tuple[type[BaseException], ...]:
+    import pyarrow as pa
+
+    return (pa.ArrowException, OSError, EOFError, UnicodeDecodeError, _Refused)
+
+
+def _csv_header(path: Path) -> list[str]:
+    """Column names of a CSV's first line."""
+    try:
+        with _open_text(path) as fh:
+            header_line = fh.readline()
+    except UnicodeDecodeError:
+        raise DataFileError(_bad_text(path)) from None
+    except (OSError, EOFError) as exc:
+        raise DataFileError(f"{path}: cannot read: {exc}") from None
+    return [h.strip() for h in header_line.strip().split(",")]
+
+
+def _parquet_columns(path: Path) -> list[str]:
+    """Column names of a parquet file's schema."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    try:
+        return list(pq.ParquetFile(path).schema_arrow.names)
+    except (pa.ArrowException, OSError) as exc:
+        raise DataFileError(f"{path}: cannot read as parquet: {exc}") from None
+
+
 class TableReader:
     """The named columns of a CSV in chunks of rows, checked like :func:`read_table`.
 
@@ -310,14 +344,7 @@ class TableReader:
         if path.stat().st_size == 0:
             raise DataFileError(f"{path}: line 1: the file is empty (expected a CSV with the header "
                                 f"{','.join(columns)})")
-        try:
-            with _open_text(path) as fh:
-                header_line = fh.readline()
-        except UnicodeDecodeError:
-            raise DataFileError(_bad_text(path)) from None
-        except (OSError, EOFError) as exc:
-            raise DataFileError(f"{path}: cannot read: {exc}") from None
-        self.header = header = [h.strip() for h in header_line.strip().split(",")]
+        self.header = header = _parquet_columns(path) if path.suffix == ".parquet" else _csv_header(path)
         missing = [c for c in columns if c not in header]
         if missing:
             raise DataFileError(
@@ -326,7 +353,11 @@ class TableReader:
         self.usecols = [header.index(c) for c in columns]
 
     def estimated_rows(self) -> int:
-        """Data rows, estimated from the file size and the first 64 kB (uncompressed files only)."""
+        """Data rows, estimated from the file size and the first 64 kB (a parquet file says how many)."""
+        if self.path.suffix == ".parquet":
+            import pyarrow.parquet as pq
+
+            return int(pq.ParquetFile(self.path).metadata.num_rows)
         size = self.path.stat().st_size
         if self.path.suffix == ".gz":
             size *= 4  # typical ratio of a CSV of floats
@@ -341,12 +372,90 @@ class TableReader:
         return int(size / (sum(len(ln) + 1 for ln in lines) / len(lines)))
 
     def chunks(self) -> Iterator[np.ndarray]:
-        """Consecutive (n, k) arrays of data rows (one array for a file of up to 4 chunks: numpy reads it faster)."""
-        if self.path.suffix != ".gz" and self.path.stat().st_size <= 4 * self.chunk_bytes:
+        """Consecutive (n, k) arrays of data rows.
+
+        A parquet file is read by row groups. A CSV is parsed by pyarrow's
+        multithreaded reader (exact float conversion); whatever it refuses
+        is handed, from the first row not yet yielded, to the line-by-line
+        numpy parser, which accepts what the contract accepts and names the
+        line and column of the first bad cell.
+        """
+        if self.path.suffix == ".parquet":
+            yield from self._parquet_chunks()
+            return
+        last_t: float | None = None
+        try:
+            for data in self._arrow_chunks():
+                last_t = self._check(data, self._locate(self.rows), last_t)
+                self.rows += data.shape[0]
+                yield data
+        except _arrow_refused():
+            yield from self._numpy_chunks(skip=self.rows, last_t=last_t)
+            return
+        if self.rows == 0:
+            raise DataFileError(f"{self.path}: no data rows")
+
+    def _arrow_chunks(self) -> Iterator[np.ndarray]:
+        """Data rows as parsed by pyarrow.csv, in blocks of about ``chunk_bytes`` of text."""
+        import pyarrow as pa
+        from pyarrow import csv as pacsv
+
+        if len(set(self.header)) != len(self.header):
+            raise _Refused("repeated column names")
+        read = pacsv.ReadOptions(column_names=self.header, skip_rows=1, block_size=min(self.chunk_bytes, 1 << 30))
+        convert = pacsv.ConvertOptions(column_types={c: pa.float64() for c in self.columns},
+                                       include_columns=list(self.columns), null_values=[], strings_can_be_null=False,
+                                       quoted_strings_can_be_null=False)
+        with pa.input_stream(str(self.path), compression="detect") as stream:
+            reader = pacsv.open_csv(stream, read_options=read, convert_options=convert)
+            for batch in reader:
+                if batch.num_rows:
+                    yield np.column_stack([batch.column(i).to_numpy(zero_copy_only=False)
+                                           for i in range(batch.num_columns)])
+
+    def _parquet_chunks(self) -> Iterator[np.ndarray]:
+        """Data rows of a parquet file, one array per row group (columns cast to float64)."""
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        last_t: float | None = None
+        try:
+            pf = pq.ParquetFile(self.path)
+            for batch in pf.iter_batches(batch_size=max(self.chunk_bytes // 64, 1), columns=list(self.columns)):
+                data = np.column_stack([batch.column(i).cast(pa.float64()).to_numpy(zero_copy_only=False)
+                                        for i in range(batch.num_columns)])
+                last_t = self._check(data, lambda i, r0=self.rows: r0 + i + 1, last_t, unit="row")
+                self.rows += data.shape[0]
+                yield data
+        except (pa.ArrowException, OSError, ValueError) as exc:
+            if isinstance(exc, DataFileError):
+                raise
+            raise DataFileError(f"{self.path}: cannot read as parquet: {exc}") from None
+        if self.rows == 0:
+            raise DataFileError(f"{self.path}: no data rows")
+
+    def _locate(self, row0: int) -> Callable[[int], int]:
+        """File line of data row ``row0 + i`` (blank lines counted), found by reading the file again."""
+
+        def line_of(i: int) -> int:
+            seen = -1
+            with _open_text(self.path) as fh:
+                fh.readline()
+                for k, line in enumerate(fh, start=2):
+                    if line.strip():
+                        seen += 1
+                        if seen == row0 + i:
+                            return k
+            return row0 + i + 2
+
+        return line_of
+
+    def _numpy_chunks(self, skip: int, last_t: float | None) -> Iterator[np.ndarray]:
+        """The line-by-line parser, starting after ``skip`` data rows (blank lines not counted)."""
+        if skip == 0 and self.path.suffix != ".gz" and self.path.stat().st_size <= 4 * self.chunk_bytes:
             yield self._whole()
             return
         path = self.path
-        last_t: float | None = None
         line0 = 2  # file line of the first line in the chunk
         try:
             fh = _open_text(path)
@@ -355,13 +464,19 @@ class TableReader:
         with fh:
             try:
                 fh.readline()
+                while skip:
+                    line = fh.readline()
+                    if not line:
+                        break
+                    line0 += 1
+                    skip -= bool(line.strip())
                 while True:
                     lines = fh.readlines(self.chunk_bytes)
                     if not lines:
                         break
                     data = self._parse(lines, line0)
                     if data.shape[0]:
-                        last_t = self._check(data, lambda: lines, line0, last_t)
+                        last_t = self._check(data, lambda i, ls=lines, l0=line0: self._line_of(ls, l0, i), last_t)
                         self.rows += data.shape[0]
                         yield data
                     line0 += len(lines)
@@ -394,7 +509,7 @@ class TableReader:
             raise DataFileError(f"{path}: cannot read: {exc}") from None
         if data.shape[0] == 0:
             raise DataFileError(f"{path}: no data rows")
-        self._check(data, lines, 2, None)
+        self._check(data, lambda i: self._line_of(lines(), 2, i), None)
         self.rows = data.shape[0]
         return data
 
@@ -432,13 +547,14 @@ class TableReader:
                     return line0 + k
         return line0 + data_row
 
-    def _check(self, data: np.ndarray, lines: Callable[[], list[str]], line0: int, last_t: float | None) -> float:
+    def _check(self, data: np.ndarray, line_of: Callable[[int], int], last_t: float | None, unit: str = "line") -> float:
+        """Finite values and increasing time; ``line_of(i)`` locates data row i of the chunk in the file."""
         path, columns = self.path, self.columns
         bad = ~np.isfinite(data)
         if bad.any():
             i, j = np.argwhere(bad)[0]
             raise DataFileError(
-                f"{path}: line {self._line_of(lines(), line0, i)}, column '{columns[j]}': "
+                f"{path}: {unit} {line_of(i)}, column '{columns[j]}': "
                 f"value {float(data[i, j])!r} is not finite"
             )
         if self.strictly_increasing:
@@ -450,7 +566,7 @@ class TableReader:
                 if last_t is not None:
                     i -= 1  # index in data
                 raise DataFileError(
-                    f"{path}: line {self._line_of(lines(), line0, i)}, column 't': time {float(data[i, 0])!r} "
+                    f"{path}: {unit} {line_of(i)}, column 't': time {float(data[i, 0])!r} "
                     f"does not increase (previous row has {prev!r})"
                 )
         return float(data[-1, 0])
@@ -498,20 +614,73 @@ def write_init(path: str | Path, init: InitialState) -> None:
     Path(path).write_text(json.dumps(init.to_dict(), indent=2) + "\n", encoding="utf-8")
 
 
+def _arrow_table(columns: Sequence[str], data: np.ndarray) -> object:
+    import pyarrow as pa
+
+    return pa.table({c: np.ascontiguousarray(data[:, j], dtype=np.float64) for j, c in enumerate(columns)})
+
+
 def format_rows(data: np.ndarray) -> str:
-    """CSV body with shortest round-trip float text (Python's float repr)."""
+    """CSV body with shortest round-trip float text (pyarrow's writer: ``float(text)`` gives the value back)."""
     if data.shape[0] == 0:
         return ""
-    return "\n".join(",".join(map(repr, row)) for row in data.tolist()) + "\n"
+    from pyarrow import csv as pacsv
+
+    buf = io.BytesIO()
+    pacsv.write_csv(_arrow_table([f"c{j}" for j in range(data.shape[1])], data), buf,
+                    pacsv.WriteOptions(include_header=False, quoting_style="none"))
+    return buf.getvalue().decode("ascii")
+
+
+class TableWriter:
+    """Named float columns written in chunks to a CSV (header line, round-trip floats) or,
+    for a ``.parquet`` path, a parquet file (float64 columns, one row group per chunk)."""
+
+    def __init__(self, path: str | Path, columns: Sequence[str]) -> None:
+        self.path = Path(path)
+        self.columns = tuple(columns)
+        self.rows = 0
+        self._parquet = None
+        self._fh = None
+        if self.path.suffix == ".parquet":
+            import pyarrow as pa
+            import pyarrow.parquet as pq
+
+            schema = pa.schema([(c, pa.float64()) for c in self.columns])
+            self._parquet = pq.ParquetWriter(self.path, schema)
+        else:
+            self._fh = open(self.path, "wb")  # noqa: SIM115 - closed by close()
+            self._fh.write((",".join(self.columns) + "\n").encode("ascii"))
+
+    def write(self, data: np.ndarray) -> None:
+        """Append rows (an (n, len(columns)) array)."""
+        if data.shape[0] == 0:
+            return
+        if self._parquet is not None:
+            self._parquet.write_table(_arrow_table(self.columns, data))
+        else:
+            self._fh.write(format_rows(data).encode("ascii"))  # type: ignore[union-attr]
+        self.rows += data.shape[0]
+
+    def close(self) -> None:
+        if self._parquet is not None:
+            self._parquet.close()
+        if self._fh is not None:
+            self._fh.close()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
 
 def write_table(path: str | Path, columns: tuple[str, ...], data: np.ndarray) -> None:
-    """Write a CSV with a header line and round-trip floats."""
-    with open(path, "w", encoding="utf-8", newline="") as fh:
-        fh.write(",".join(columns) + "\n")
-        chunk = 65536
+    """Write a table (CSV with a header line and round-trip floats, or parquet by the suffix)."""
+    with TableWriter(path, columns) as w:
+        chunk = 1 << 18
         for start in range(0, data.shape[0], chunk):
-            fh.write(format_rows(data[start : start + chunk]))
+            w.write(data[start : start + chunk])
 
 
 def read_solution(path: str | Path) -> np.ndarray:

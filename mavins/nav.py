@@ -67,8 +67,7 @@ def run_nav(imu_path: Path, init_path: Path, out_path: Path, opts: NavOptions) -
     with files.atomic_output(out_path) as tmp:
         t0 = time.perf_counter()
         try:
-            with open(tmp, "w", encoding="utf-8", newline="") as fh:
-                fh.write(",".join(files.SOLUTION_COLUMNS) + "\n")
+            with files.TableWriter(tmp, files.SOLUTION_COLUMNS) as writer:
                 t_write += time.perf_counter() - t0
                 t0 = time.perf_counter()
                 first = True
@@ -87,7 +86,7 @@ def run_nav(imu_path: Path, init_path: Path, out_path: Path, opts: NavOptions) -
                     sol = to_file_units(out[:m])
                     t2 = time.perf_counter()
                     t_compute += t2 - t1
-                    fh.write(files.format_rows(sol))
+                    writer.write(sol)
                     rows += m
                     t0 = time.perf_counter()
                     t_write += t0 - t2
