@@ -145,19 +145,6 @@ def _add_nav(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--init", type=Path, required=True, metavar="INIT.json", help="initial state JSON")
     p.add_argument("-o", "--output", type=Path, required=True, metavar="NAV.csv", help="solution CSV to write")
     p.add_argument("--input", choices=("increments", "rates"), default="increments", help="what the IMU file holds")
-    p.add_argument(
-        "--imu-rates",
-        choices=("averaged", "sampled"),
-        default="averaged",
-        help="with --input rates: each row is the mean over the interval ending at its t, or an instantaneous sample",
-    )
-    p.add_argument(
-        "--samples",
-        type=_positive_int(1, 6),
-        default=2,
-        metavar="N",
-        help="samples per attitude/velocity update, 1..6; N>=2 applies N-sample coning and sculling",
-    )
     _strapdown_options(p)
     g = p.add_argument_group("aided navigation (with --gnss and/or --baro; docs/filter.md)")
     g.add_argument("--gnss", type=Path, metavar="GNSS.csv",
@@ -169,24 +156,19 @@ def _add_nav(sub: argparse._SubParsersAction) -> None:
 
 
 def _strapdown_options(p: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
-    """The strapdown settings nav, run and replay share (docs/conventions.md ``mavins nav``)."""
-    p.add_argument("--no-coning", action="store_true", help="keep N-sample updates but drop coning and sculling corrections")
-    p.add_argument("--attitude", choices=("quaternion", "dcm"), default="quaternion", help="attitude representation")
-    p.add_argument(
-        "--order", choices=("1", "2", "3", "4", "exact"), default="exact", help="series order of the attitude update"
-    )
-    p.add_argument(
-        "--earth", choices=("wgs84", "none"), default="wgs84", help="none = non-rotating laboratory frame, constant gravity"
-    )
-    p.add_argument("--orthonormalize-every", type=_positive_int(0), default=1, metavar="K",
-                   help="with --attitude dcm, re-orthonormalise every K updates (0 = never)")
-    p.add_argument(
-        "--vertical", choices=("free", "hold"), default="free", help="hold = keep height and vertical velocity at start values"
-    )
-    p.add_argument("--position", choices=("rectangular", "trapezoidal", "simpson"), default="trapezoidal",
-                   help="integration rule of the position update")
-    p.add_argument("--l-every", type=_positive_int(1), default=1, metavar="M",
-                   help="attitude updates per slow (l) cycle: Earth rate, transport rate, gravity")
+    """The strapdown settings nav, run and replay share, built from their one definition
+    (mavins/core/settings.py; docs/conventions.md ``mavins nav``)."""
+    from .core.settings import SETTINGS
+
+    for s in SETTINGS:
+        if s.switch_off:
+            p.add_argument(s.flag, action="store_true", help=s.help)
+        elif s.choices is not None:
+            p.add_argument(s.flag, choices=s.choices, default=s.default, help=s.help)
+        else:
+            lo, hi = s.int_range  # type: ignore[misc]
+            p.add_argument(s.flag, type=_positive_int(lo, hi) if hi is not None else _positive_int(lo),
+                           default=s.default, metavar=s.metavar, help=s.help)
 
 
 GRADES = ("consumer", "industrial", "tactical", "navigation")
@@ -207,21 +189,22 @@ def _filter_options(g: argparse._ArgumentGroup, with_aiding: bool = True) -> Non
                    help="GNSS antenna position from the IMU, body frame FRD (m)")
 
 
-def _imu_spec(args: argparse.Namespace) -> str | dict:
-    """The grade name, or the keys of --imu-spec (a one-line error on a bad file)."""
+def _imu_spec(args: argparse.Namespace, extra_keys: tuple[str, ...] = ()) -> str | dict:
+    """The grade name, or the keys of --imu-spec (a one-line error on a bad file); ``extra_keys`` are allowed too."""
     if getattr(args, "imu_spec", None) is None:
         return args.grade
     import tomllib
 
     from .core.errmodel import SPEC_KEYS
 
+    allowed = SPEC_KEYS + extra_keys
     try:
         keys = tomllib.loads(args.imu_spec.read_text())
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
         raise ValueError(f"--imu-spec {args.imu_spec}: {exc}") from None
-    unknown = sorted(set(keys) - set(SPEC_KEYS))
+    unknown = sorted(set(keys) - set(allowed))
     if unknown:
-        raise ValueError(f"--imu-spec {args.imu_spec}: unknown keys {', '.join(unknown)} (allowed: {', '.join(SPEC_KEYS)})")
+        raise ValueError(f"--imu-spec {args.imu_spec}: unknown keys {', '.join(unknown)} (allowed: {', '.join(allowed)})")
     bad = [k for k, v in keys.items() if not isinstance(v, (int, float)) or isinstance(v, bool) or not v >= 0]
     if bad:
         raise ValueError(f"--imu-spec {args.imu_spec}: {', '.join(bad)} must be non-negative numbers")
@@ -286,20 +269,9 @@ def _cmd_nav(args: argparse.Namespace) -> int:
     from . import files
     from .nav import NavOptions, run_nav
 
-    opts = NavOptions(
-        input=args.input,
-        samples=args.samples,
-        no_coning=args.no_coning,
-        attitude=args.attitude,
-        order=args.order,
-        earth=args.earth,
-        orthonormalize_every=args.orthonormalize_every,
-        vertical=args.vertical,
-        imu_rates=args.imu_rates,
-        position=args.position,
-        l_every=args.l_every,
-        timing=args.timing,
-    )
+    from .core.settings import strapdown_from_options
+
+    opts = NavOptions(input=args.input, strapdown=strapdown_from_options(args), timing=args.timing)
     try:
         if args.gnss is None and args.baro is None:
             rows = run_nav(args.imu, args.init, args.output, opts)
@@ -366,7 +338,8 @@ def _add_sim(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--gnss-outage", type=_Outage(), metavar="START,END",
                    help="no GNSS fix between these sensor times (s), in files and when streaming")
     p.add_argument("--imus", type=_positive_int(1, 3), default=1, metavar="N",
-                   help="IMUs to stream (1..3): extras as HIGHRES_IMU id 1, 2, or with --msg raw as SCALED_IMU2/3")
+                   help="IMUs (1..3): extras written as imu1.csv, imu2.csv, streamed as HIGHRES_IMU id 1, 2 "
+                        "(with --msg raw as SCALED_IMU2/3); scenario [[faults]] name them (docs/redundancy.md)")
     p.set_defaults(func=_cmd_sim)
 
 
@@ -380,17 +353,17 @@ def _cmd_sim(args: argparse.Namespace) -> int:
         print(f"mavins sim: error: {_scenario_error(args.scenario, exc)}", file=sys.stderr)
         return EXIT_USAGE
     speed = None if args.speed == "max" else float(args.speed)
-    from sim.generate import FILE_NAMES, check_size, generate, write
+    from sim.generate import FILE_NAMES, check_size, extra_names, generate, write
 
     try:
         if args.output is not None:
             if args.output.exists() and not args.output.is_dir():
                 raise files.DataFileError(f"{args.output}: -o names a file, expected a directory to write into")
-            files.check_outputs({f"-o {args.output}/{n}": args.output / n for n in FILE_NAMES},
+            files.check_outputs({f"-o {args.output}/{n}": args.output / n for n in FILE_NAMES + extra_names(args.imus)},
                                 {"SCENARIO": Path(scenario.source)})
         check_size(scenario, duration=args.duration, rate=args.rate, outdir=args.output)
         run = generate(scenario, duration=args.duration, rate=args.rate, seed=args.seed, grade=args.grade,
-                       usec_grid=args.stream is not None)
+                       usec_grid=args.stream is not None, imus=args.imus)
         if args.output is not None:
             from sim.aiding import GnssConfig, simulate_aiding
 
@@ -438,9 +411,6 @@ def _nav_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--gyro-bias", choices=("estimate", "none"), default="estimate",
                    help="estimate = remove the mean gyro minus Earth rate of the static window (not with gyrocompass)")
     g.add_argument("--align", type=_real(0.0), default=10.0, metavar="S", help="static coarse alignment window (sensor time)")
-    g.add_argument("--imu-rates", choices=("averaged", "sampled"), default="averaged",
-                   help="IMU rates are interval averages (PX4 HIGHRES_IMU) or instantaneous samples")
-    g.add_argument("--samples", type=_positive_int(1, 6), default=2, metavar="N", help="samples per attitude update (1..6)")
     g.add_argument("--rate", type=_real(0.0, 1e4, above=True), default=50.0, metavar="HZ", help="output rate in sensor time")
     g.add_argument("--imu", default="auto", choices=("auto", "highres", "raw", "scaled", "scaled2", "scaled3"),
                    help="IMU message to navigate on (auto = the first one seen)")
@@ -535,12 +505,12 @@ def _engine_config(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     from .aiding import FilterSettings
 
     flt = FilterSettings(spec=_imu_spec(args), aiding=args.aiding, gate=args.gate, lever_arm=args.lever_arm)
+    from .core.settings import strapdown_from_options
+
     return EngineConfig(lat=args.lat, lon=args.lon, alt=args.alt, heading=heading, declination=args.declination,
-                        align=args.align, imu_rates=args.imu_rates, rate=args.rate, samples=args.samples,
-                        gyro_bias=args.gyro_bias, max_gap=args.max_gap, attitude=args.attitude, order=args.order,
-                        earth_model=args.earth, vertical=args.vertical, coning=not args.no_coning,
-                        orthonormalize_every=args.orthonormalize_every, position=args.position,
-                        l_every=args.l_every, filter=flt, geoid_height=getattr(args, "geoid_height", 0.0))
+                        align=args.align, rate=args.rate, gyro_bias=args.gyro_bias, max_gap=args.max_gap,
+                        filter=flt, geoid_height=getattr(args, "geoid_height", 0.0),
+                        **strapdown_from_options(args).keywords())
 
 
 def _ingest_config(args: argparse.Namespace):  # type: ignore[no-untyped-def]
@@ -823,6 +793,78 @@ def _cmd_key(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_analyze(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "analyze",
+        help="error budget of a scenario: covariance analysis and Monte Carlo (docs/analysis.md)",
+        description=(
+            "How far does the free-inertial solution drift on this scenario with this IMU? Propagates the "
+            "linear error model (attitude, velocity, position, biases, scale factors, misalignments) along "
+            "the scenario's true trajectory, each error source alone and together, and runs N strapdown "
+            "solutions on the scenario's data corrupted with random sensor errors drawn from the same "
+            "specification. Every run starts from the true initial state. Writes DIR/covariance.csv "
+            "(1-sigma), DIR/montecarlo.csv (sample sigma of the runs), columns t, sigma_n,sigma_e,sigma_d (m), "
+            "sigma_vn,sigma_ve,sigma_vd (m/s), sigma_att_n,sigma_att_e,sigma_att_d (deg); DIR/budget.csv "
+            "(source,pos_h,pos_v,vel_h,att_level,att_yaw at the end: each source alone); DIR/analysis.png "
+            "when matplotlib is installed; and prints the budget."
+        ),
+        epilog="Runs go to all local cores (--jobs) or, with --cluster tcp://HOST:8786, to a running Dask "
+        "scheduler whose workers have mavins installed (pip install 'mavins[cluster]').",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    p.add_argument("scenario", metavar="SCENARIO", help="built-in scenario name or path to a scenario .toml")
+    p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="write the files into DIR")
+    p.add_argument("--runs", type=_positive_int(2, 1_000_000), default=100, metavar="N", help="Monte Carlo runs")
+    spec = p.add_mutually_exclusive_group()
+    spec.add_argument("--grade", choices=GRADES, default="industrial",
+                      help="IMU error model: a grade's figures (scale factor and misalignment taken as 1-sigma)")
+    spec.add_argument("--imu-spec", type=Path, metavar="SPEC.toml",
+                      help="IMU error model from a TOML file: the aided-navigation keys plus gyro_scale, accel_scale "
+                      "(ppm), gyro_misalignment, accel_misalignment (arcsec), all 1-sigma (docs/conventions.md)")
+    p.add_argument("--jobs", type=_positive_int(1, 4096), default=None, metavar="J",
+                   help="local worker processes for the Monte Carlo (default: all cores; 1 = in this process)")
+    p.add_argument("--cluster", metavar="ADDRESS", default=None,
+                   help="submit the Monte Carlo runs to this Dask distributed scheduler instead of local cores")
+    p.add_argument("--vertical", choices=("free", "hold"), default="free",
+                   help="hold = height and vertical velocity kept at their true values (no unstable vertical channel)")
+    p.add_argument("--duration", type=_real(**POSITIVE), default=None, metavar="S",
+                   help="seconds to simulate (default: the scenario's)")
+    p.add_argument("--rate", type=_real(0.0, 1e6, above=True), default=None, metavar="HZ",
+                   help="IMU sample rate (default: the scenario's)")
+    p.add_argument("--seed", type=_positive_int(0), default=0, metavar="N",
+                   help="random seed of the Monte Carlo (run i uses the seed sequence (N, i))")
+    p.set_defaults(func=_cmd_analyze)
+
+
+def _cmd_analyze(args: argparse.Namespace) -> int:
+    from . import files
+    from sim.scenarios import ScenarioError, load
+
+    try:
+        scenario = load(args.scenario)
+    except (ScenarioError, UnicodeDecodeError, OSError) as exc:
+        print(f"mavins analyze: error: {_scenario_error(args.scenario, exc)}", file=sys.stderr)
+        return EXIT_USAGE
+    from .analysis import AnalysisOptions, run_analyze
+    from .core import covariance
+    from .parallel import JobError
+    from sim.generate import check_size
+
+    try:
+        keys = _imu_spec(args, covariance.ANALYSIS_KEYS)
+        spec = covariance.spec_from_grade(keys) if isinstance(keys, str) else covariance.spec_from_keys(keys)
+        check_size(scenario, duration=args.duration, rate=args.rate)
+        opts = AnalysisOptions(runs=args.runs, jobs=args.jobs, cluster=args.cluster, vertical=args.vertical,
+                               duration=args.duration, rate=args.rate, seed=args.seed)
+        paths = run_analyze(scenario, spec, args.output, opts)
+    except (ValueError, OSError, ImportError, JobError) as exc:  # ScenarioError, DataFileError, ResourceError: ValueError
+        text = f"{exc.filename}: {exc.strerror}" if isinstance(exc, OSError) and exc.filename else str(exc)
+        print(f"mavins analyze: error: {text}", file=sys.stderr)
+        return EXIT_USAGE
+    print(f"mavins analyze: {scenario.name}: {args.runs} runs: " + ", ".join(str(p) for p in paths), file=sys.stderr)
+    return 0
+
+
 def _add_review(sub: argparse._SubParsersAction) -> None:
     from .record.review import DESCRIPTION, add_arguments, run
 
@@ -856,7 +898,8 @@ def _version() -> str:
         return "unknown"
 
 
-_EXTRA_COMMANDS: list[Callable[[argparse._SubParsersAction], None]] = [_add_sim, _add_run, _add_replay, _add_demo, _add_review, _add_key]
+_EXTRA_COMMANDS: list[Callable[[argparse._SubParsersAction], None]] = [_add_sim, _add_run, _add_replay, _add_demo, _add_review, _add_key,
+                                                                     _add_analyze]
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -887,7 +930,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             signal.signal(signal.SIGTERM, previous)
 
 
-OFFLINE_COMMANDS = ("nav", "sim", "replay", "review", "key")
+OFFLINE_COMMANDS = ("nav", "sim", "replay", "review", "key", "analyze")
 
 
 class _Terminated(BaseException):

@@ -19,6 +19,7 @@ import numpy as np
 from .core import align, earth
 from .core import strapdown as sd
 from .core.records import ImuSample, Solution
+from .core.settings import Strapdown, strapdown_of
 from .aiding import FilterSettings, LiveFilter
 from .core.rotation import euler_to_dcm
 
@@ -34,6 +35,9 @@ MAX_HEIGHT = 1.0e6  # m: beyond this (either sign) the solution has diverged
 MAX_SPEED = 1.0e4  # m/s: likewise
 
 
+_SD = Strapdown()
+
+
 @dataclass
 class EngineConfig:
     """Navigation settings (docs/conventions.md ``mavins run``); angles in degrees."""
@@ -44,17 +48,18 @@ class EngineConfig:
     heading: float | str = "auto"
     declination: float = 0.0
     align: float = 10.0
-    imu_rates: str = "averaged"
     rate: float = 50.0
-    samples: int = 2
-    attitude: str = "quaternion"
-    order: str = "exact"
-    earth_model: str = "wgs84"
-    vertical: str = "free"
-    coning: bool = True
-    orthonormalize_every: int = 1
-    position: str = "trapezoidal"
-    l_every: int = 1
+    # the strapdown settings (mavins/core/settings.py: names, defaults and help defined once)
+    samples: int = _SD.samples
+    coning: bool = _SD.coning
+    imu_rates: str = _SD.imu_rates
+    attitude: str = _SD.attitude
+    order: str = _SD.order
+    earth_model: str = _SD.earth_model
+    orthonormalize_every: int = _SD.orthonormalize_every
+    vertical: str = _SD.vertical
+    position: str = _SD.position
+    l_every: int = _SD.l_every
     motion_gyro: float = 0.1  # rad/s: a sample above this restarts the alignment
     motion_accel: float = 1.5  # m/s^2: |f| - g beyond this restarts the alignment
     max_gap: float = 1.0  # s: a longer gap in sensor time is not integrated; the solution is degraded
@@ -105,12 +110,7 @@ class Engine:
             raise ValueError(f"gyro_bias must be estimate or none, got {self.cfg.gyro_bias!r}")
         # one declination for the alignment and the filter's magnetometer updates
         self.filter = LiveFilter(dataclasses.replace(self.cfg.filter, declination=self.cfg.declination))
-        self._kcfg = sd.make_config(
-            samples=self.cfg.samples, attitude=self.cfg.attitude, order=self.cfg.order,
-            earth_model=self.cfg.earth_model, vertical=self.cfg.vertical, imu_rates=self.cfg.imu_rates,
-            coning=self.cfg.coning, orthonormalize_every=self.cfg.orthonormalize_every,
-            position=self.cfg.position, l_every=self.cfg.l_every,
-        )
+        self._kcfg = sd.make_config(**strapdown_of(self.cfg).keywords())
         if None not in (self.cfg.lat, self.cfg.lon, self.cfg.alt):
             self.set_position(float(self.cfg.lat), float(self.cfg.lon), float(self.cfg.alt), "options")  # type: ignore[arg-type]
         else:

@@ -4,29 +4,21 @@ from __future__ import annotations
 
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from . import files
+from .core.settings import Strapdown
 
 
 @dataclass(frozen=True)
 class NavOptions:
-    """Options of ``mavins nav``, named as on the command line."""
+    """Options of ``mavins nav``: what the file holds, the strapdown settings, --timing."""
 
     input: str = "increments"
-    samples: int = 2
-    no_coning: bool = False
-    attitude: str = "quaternion"
-    order: str = "exact"
-    earth: str = "wgs84"
-    orthonormalize_every: int = 1
-    vertical: str = "free"
-    imu_rates: str = "averaged"
-    position: str = "trapezoidal"
-    l_every: int = 1
+    strapdown: Strapdown = field(default_factory=Strapdown)
     timing: bool = False
 
 
@@ -52,13 +44,10 @@ def run_nav(imu_path: Path, init_path: Path, out_path: Path, opts: NavOptions) -
     init = files.read_init(init_path)
     columns = files.INCREMENT_COLUMNS if opts.input == "increments" else files.RATE_COLUMNS
     reader = files.TableReader(imu_path, columns)
-    est_rows = reader.estimated_rows() // opts.samples
+    est_rows = reader.estimated_rows() // opts.strapdown.samples
     files.check_resources(f"the solution ({est_rows:,} rows, estimated)", disk=est_rows * SOLUTION_ROW_BYTES,
                           disk_at=out_path.parent)
-    cfg = sd.make_config(samples=opts.samples, attitude=opts.attitude, order=opts.order, earth_model=opts.earth,
-                         orthonormalize_every=opts.orthonormalize_every, vertical=opts.vertical,
-                         coning=not opts.no_coning, position=opts.position, l_every=opts.l_every,
-                         imu_rates=opts.imu_rates)
+    cfg = sd.make_config(**opts.strapdown.keywords())
     run = sd.run_increments if opts.input == "increments" else sd.run_rates
     state = initial_state(init.to_dict())
     t_read = time.perf_counter() - t_start
@@ -80,7 +69,7 @@ def run_nav(imu_path: Path, init_path: Path, out_path: Path, opts: NavOptions) -
                     first = False
                     t1 = time.perf_counter()
                     t_read += t1 - t0
-                    out = np.empty((table.shape[0] // opts.samples + 1, sd.OUT_SIZE))
+                    out = np.empty((table.shape[0] // opts.strapdown.samples + 1, sd.OUT_SIZE))
                     m = run(state, cfg, np.ascontiguousarray(table[:, 0]), np.ascontiguousarray(table[:, 1:4]),
                             np.ascontiguousarray(table[:, 4:7]), out)
                     sol = to_file_units(out[:m])
@@ -167,7 +156,7 @@ def run_nav_aided(imu_path: Path, init_path: Path, out_path: Path, opts: NavOpti
         if isinstance(exc, files.DataFileError):
             raise
         raise files.DataFileError(f"{init_path}: {exc}") from None
-    if opts.input == "rates" and opts.imu_rates == "sampled":
+    if opts.input == "rates" and opts.strapdown.imu_rates == "sampled":
         raise files.DataFileError("the filter takes increments or averaged rates; sampled rates are not supported "
                                   "with --gnss/--baro")
     columns = files.INCREMENT_COLUMNS if opts.input == "increments" else files.RATE_COLUMNS
@@ -180,10 +169,8 @@ def run_nav_aided(imu_path: Path, init_path: Path, out_path: Path, opts: NavOpti
     baro = read_aiding(baro_path, BARO_REQUIRED, BARO_OPTIONAL) if baro_path is not None else None
     try:
         rows, stats = aided.navigate_aided(
-            imu, init_keys, gnss, baro, spec=spec, lever_arm=lever_arm, gate=gate, samples=opts.samples,
-            attitude=opts.attitude, order=opts.order, earth_model=opts.earth,
-            orthonormalize_every=opts.orthonormalize_every, vertical=opts.vertical, coning=not opts.no_coning,
-            position=opts.position, l_every=opts.l_every)
+            imu, init_keys, gnss, baro, spec=spec, lever_arm=lever_arm, gate=gate,
+            **{k: v for k, v in opts.strapdown.keywords().items() if k != "imu_rates"})
     except ValueError as exc:
         raise files.DataFileError(str(exc)) from None
     with files.atomic_output(out_path) as tmp:

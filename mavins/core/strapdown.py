@@ -43,6 +43,7 @@ from .coning import (
     rotation_compensation,
 )
 from .jit import kernel
+from .settings import Strapdown
 from .rotation import (
     Mat9,
     Quat,
@@ -117,19 +118,22 @@ OUT_COLUMNS = ("t", "lat", "lon", "h", "vn", "ve", "vd", "roll", "pitch", "yaw",
 OUT_SIZE = len(OUT_COLUMNS)
 
 
+_DEFAULT = Strapdown()
+
+
 def make_config(
-    samples: int = 2,
-    attitude: str = "quaternion",
-    order: str = "exact",
-    earth_model: str = "wgs84",
-    orthonormalize_every: int = 1,
-    vertical: str = "free",
-    coning: bool = True,
-    position: str = "trapezoidal",
-    l_every: int = 1,
-    imu_rates: str = "averaged",
+    samples: int = _DEFAULT.samples,
+    attitude: str = _DEFAULT.attitude,
+    order: str = _DEFAULT.order,
+    earth_model: str = _DEFAULT.earth_model,
+    orthonormalize_every: int = _DEFAULT.orthonormalize_every,
+    vertical: str = _DEFAULT.vertical,
+    coning: bool = _DEFAULT.coning,
+    position: str = _DEFAULT.position,
+    l_every: int = _DEFAULT.l_every,
+    imu_rates: str = _DEFAULT.imu_rates,
 ) -> np.ndarray:
-    """Build the configuration vector from the user-facing option names."""
+    """Build the configuration vector from the settings of core/settings.py (their names and defaults)."""
     if not 1 <= samples <= MAX_SAMPLES:
         raise ValueError(f"samples must be 1..{MAX_SAMPLES}, got {samples}")
     if attitude not in ("quaternion", "dcm"):
