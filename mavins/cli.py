@@ -141,7 +141,9 @@ def _add_nav(sub: argparse._SubParsersAction) -> None:
         ),
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
-    p.add_argument("imu", type=Path, metavar="IMU.csv", help="increments (t,dtheta_*,dv_*) or rates (t,gyro_*,acc_*)")
+    p.add_argument("imu", type=Path, nargs="+", metavar="IMU.csv",
+                   help="increments (t,dtheta_*,dv_*) or rates (t,gyro_*,acc_*); several files (same times, "
+                        "same body frame) are monitored and fused first (docs/redundancy.md)")
     p.add_argument("--init", type=Path, required=True, metavar="INIT.json", help="initial state JSON")
     p.add_argument("-o", "--output", type=Path, required=True, metavar="NAV.csv", help="solution CSV to write")
     p.add_argument("--input", choices=("increments", "rates"), default="increments", help="what the IMU file holds")
@@ -152,6 +154,11 @@ def _add_nav(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--baro", type=Path, metavar="BARO.csv", help="barometric height: t,h [,sigma]")
     _filter_options(g, with_aiding=False)
     p.add_argument("--timing", action="store_true", help="print read/compute/write seconds to stderr")
+    r = p.add_argument_group("redundant IMUs (several IMU files; noise from --grade/--imu-spec; docs/redundancy.md)")
+    r.add_argument("--fdi-log", type=Path, metavar="FDI.csv",
+                   help="write the fault events: t,event,imu,sensor,axis,statistic,threshold (header only: no fault)")
+    r.add_argument("--false-alarm", type=_real(0.0, 0.5, above=True), default=1e-6, metavar="P",
+                   help="design false-alarm probability of each test")
     p.set_defaults(func=_cmd_nav)
 
 
@@ -273,12 +280,14 @@ def _cmd_nav(args: argparse.Namespace) -> int:
 
     opts = NavOptions(input=args.input, strapdown=strapdown_from_options(args), timing=args.timing)
     try:
+        if len(args.imu) > 1 or args.fdi_log is not None:
+            return _cmd_nav_fdi(args, opts)
         if args.gnss is None and args.baro is None:
-            rows = run_nav(args.imu, args.init, args.output, opts)
+            rows = run_nav(args.imu[0], args.init, args.output, opts)
         else:
             from .nav import run_nav_aided
 
-            rows, counts = run_nav_aided(args.imu, args.init, args.output, opts, args.gnss, args.baro,
+            rows, counts = run_nav_aided(args.imu[0], args.init, args.output, opts, args.gnss, args.baro,
                                          _imu_spec(args), args.lever_arm, args.gate)
             for kind, (ok, bad) in counts.items():
                 if ok or bad:
@@ -288,6 +297,30 @@ def _cmd_nav(args: argparse.Namespace) -> int:
         print(f"mavins nav: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     print(f"mavins nav: wrote {rows} solution rows to {args.output}", file=sys.stderr)
+    return 0
+
+
+def _cmd_nav_fdi(args: argparse.Namespace, opts: object) -> int:
+    """``mavins nav IMU0.csv IMU1.csv ... [--fdi-log FDI.csv]``: parse, call mavins.fdi, report."""
+    from . import files
+    from .fdi import run_nav_fdi, strapdown_keywords
+
+    try:
+        if args.gnss is not None or args.baro is not None:
+            raise ValueError("several IMU files with --gnss/--baro are not supported (the fused solution is "
+                             "free inertial)")
+        rows, events = run_nav_fdi(args.imu, args.init, args.output, args.fdi_log, rates=args.input == "rates",
+                                   strapdown=strapdown_keywords(opts), spec=_imu_spec(args),
+                                   false_alarm=args.false_alarm)
+    except (files.DataFileError, files.ResourceError, ValueError) as exc:
+        print(f"mavins nav: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    for e in events:
+        where = f" IMU {e.imu} {e.sensor} {e.axis}" if e.imu is not None else f" {e.sensor}"
+        print(f"mavins nav: t={e.t:.3f} s: {e.event}{where} (statistic {e.statistic:.4g}, threshold "
+              f"{e.threshold:.4g})", file=sys.stderr)
+    print(f"mavins nav: fused {len(args.imu)} IMUs, {len(events)} fault event(s); wrote {rows} solution rows "
+          f"to {args.output}", file=sys.stderr)
     return 0
 
 

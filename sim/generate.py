@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import shutil
@@ -14,7 +15,7 @@ import numpy as np
 
 from mavins import files
 
-from . import errors
+from . import errors, faults
 from .scenarios import Scenario, apply_turntable, build
 from .trajectory import SimResult, simulate
 
@@ -29,7 +30,9 @@ class SimRun:
     """A simulated recording: exact truth plus what the (imperfect) IMU reports.
 
     ``t``, ``dtheta``, ``dv`` are the sensor's rows (after jitter and drops);
-    ``exact`` holds the error-free increments and truth at the true times.
+    ``exact`` holds the error-free increments and truth at the true times;
+    ``extra`` the (dtheta, dv) of the extra IMUs 1.. on the same rows (own
+    error draws, no timing defects of their own), scenario faults included.
     """
 
     scenario: Scenario
@@ -41,6 +44,7 @@ class SimRun:
     dtheta: np.ndarray
     dv: np.ndarray
     kept: np.ndarray
+    extra: tuple[tuple[np.ndarray, np.ndarray], ...] = ()
 
     def init(self) -> files.InitialState:
         return files.InitialState(**self.exact.init())
@@ -53,11 +57,12 @@ class SimRun:
 
 def generate(
     scenario: Scenario, *, duration: float | None = None, rate: float | None = None, seed: int = 0,
-    grade: str | None = None, usec_grid: bool = False,
+    grade: str | None = None, usec_grid: bool = False, imus: int = 1,
 ) -> SimRun:
     """Simulate a scenario for ``duration`` s at ``rate`` Hz with the IMU ``grade``.
 
-    ``usec_grid`` puts the samples on whole microseconds (for MAVLink streaming).
+    ``usec_grid`` puts the samples on whole microseconds (for MAVLink streaming);
+    ``imus`` (1..3) IMUs, the scenario's ``[[faults]]`` applied (sim/faults.py).
     """
     traj = build(scenario)
     length = traj.t - traj.t0
@@ -75,28 +80,61 @@ def generate(
     g = grade if grade is not None else scenario.grade
     model = errors.grade(g)
     t, dth, dv, kept = errors.apply(model, exact.t, exact.dtheta, exact.dv, seed, t_start=exact.t0)
-    return SimRun(scenario, hz, g, seed, exact, t, dth, dv, kept)
+    flist = faults.parse(scenario.doc, scenario.source)
+    if any(f.imu >= imus for f in flist):
+        raise ValueError(f"{scenario.source}: a fault names IMU {max(f.imu for f in flist)}, "
+                         f"but the run has {imus} IMU(s) (--imus)")
+    begin = np.concatenate(([exact.t0], exact.t[:-1]))[kept]
+    end = exact.t[kept]
+    dth, dv = faults.apply(flist, 0, begin, end, dth, dv)
+    return SimRun(scenario, hz, g, seed, exact, t, dth, dv, kept,
+                  _extra_imus(model, exact, kept, seed, imus, flist, begin, end))
+
+
+def _extra_imus(model: errors.ImuErrorModel, exact: SimResult, kept: np.ndarray, seed: int, imus: int,
+                flist: list[faults.Fault], begin: np.ndarray, end: np.ndarray
+                ) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
+    """Increments of IMUs 1..imus-1 on the primary's kept rows: own error draws (seed + 7919 k), no
+    jitter or drops of their own (one clock samples them all), their faults applied."""
+    if not 1 <= imus <= 3:
+        raise ValueError(f"imus must be 1..3, got {imus}")
+    quiet = dataclasses.replace(model, jitter_sigma=0.0, drop_probability=0.0)
+    out = []
+    for k in range(1, imus):
+        _, dth, dv, _ = errors.apply(quiet, exact.t, exact.dtheta, exact.dv, seed + 7919 * k, t_start=exact.t0)
+        out.append(faults.apply(flist, k, begin, end, dth[kept], dv[kept]))
+    return tuple(out)
+
+
+def extra_names(imus: int) -> tuple[str, ...]:
+    """Files of the extra IMUs written with ``--imus N``: imu1.csv, imu2.csv."""
+    return tuple(f"imu{k}.csv" for k in range(1, imus))
 
 
 def write(run: SimRun, outdir: Path, aiding: Aiding | None = None) -> list[Path]:
     """Write imu.csv, imu_rates.csv, truth.csv and init.json (CONVENTIONS.md) into outdir.
 
-    With ``aiding`` (sim.aiding.simulate_aiding) also gnss.csv, baro.csv, mag.csv (those it holds).
+    With extra IMUs also imu1.csv, imu2.csv (increments, the rows of imu.csv). With ``aiding``
+    (sim.aiding.simulate_aiding) also gnss.csv, baro.csv, mag.csv (those it holds).
     """
     # Files are written beside their targets and renamed into place at the end (files.atomic_outputs): an
     # error, a full disk or Ctrl-C leaves outdir as it was. Too large for the disk: files.ResourceError first.
     imu, rates, truth, init = (outdir / name for name in FILE_NAMES)
+    extras = [outdir / name for name in extra_names(len(run.extra) + 1)]
     files.check_resources(f"the files of {len(run.t):,} samples", disk=len(run.t) * DISK_PER_SAMPLE, disk_at=outdir,
                           hint=" (shorten --duration or lower --rate)")
     stage: Path | None = None
     try:
-        with files.atomic_outputs([imu, rates, truth, init]) as (t_imu, t_rates, t_truth, t_init):
+        with files.atomic_outputs([imu, rates, truth, init, *extras]) as (t_imu, t_rates, t_truth, t_init,
+                                                                          *t_extras):
             try:
                 files.write_table(t_imu, files.INCREMENT_COLUMNS, np.column_stack([run.t, run.dtheta, run.dv]))
                 w, f = run.rates()
                 files.write_table(t_rates, files.RATE_COLUMNS, np.column_stack([run.t, w, f]))
                 files.write_table(t_truth, SimResult.TRUTH_COLUMNS, run.exact.truth)
                 files.write_init(t_init, run.init())
+                for t_x, (dth_x, dv_x) in zip(t_extras, run.extra):
+                    files.write_table(t_x, files.INCREMENT_COLUMNS, np.column_stack([run.t, dth_x, dv_x]))
                 if aiding is not None:  # its files go to a hidden folder in outdir, moved in with the others
                     stage = Path(tempfile.mkdtemp(dir=outdir, prefix=".aiding.", suffix=".tmp"))
                     staged = [Path(p) for p in aiding.write(stage)]
@@ -104,7 +142,7 @@ def write(run: SimRun, outdir: Path, aiding: Aiding | None = None) -> list[Path]
                 if stage is not None:  # before atomic_outputs removes a folder it made
                     shutil.rmtree(stage, ignore_errors=True)
                 raise
-        paths = [imu, rates, truth, init]
+        paths = [imu, rates, truth, init, *extras]
         if stage is not None:
             for p in staged:
                 os.replace(p, outdir / p.name)

@@ -15,6 +15,7 @@ from collections.abc import Collection, Iterator
 from typing import Any
 
 from . import SCENARIO_DIR as BUILTIN_DIR
+from . import faults
 from .trajectory import Trajectory
 
 
@@ -142,9 +143,13 @@ def build(s: Scenario) -> Trajectory:
     """Build the trajectory a scenario describes (raises ScenarioError on bad keys or values)."""
     src = s.source
     _keys(src, "[imu]", s.doc.get("imu", {}), set(), _IMU_KEYS)
-    unknown_top = set(s.doc) - {"description", "start", "imu", "segments", "perturbations", "turntable"}
+    unknown_top = set(s.doc) - {"description", "start", "imu", "segments", "perturbations", "turntable", "faults"}
     if unknown_top:
         raise ScenarioError(f"{src}: unknown top-level key(s) {', '.join(sorted(unknown_top))}")
+    try:
+        faults.parse(s.doc, src)
+    except ValueError as exc:
+        raise ScenarioError(str(exc)) from None
     if s.rate <= 0:
         raise ScenarioError(f"{src}: [imu]: rate must be positive, got {s.rate}")
     start = _keys(src, "[start]", s.doc.get("start"), {"lat", "lon", "h"}, _START_KEYS - {"lat", "lon", "h"})

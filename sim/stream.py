@@ -153,9 +153,13 @@ def frames(run: SimRun, mav: mavlink.MAVLink, opts: StreamOptions) -> Iterator[t
 
 
 def _extra_imus(run: SimRun, opts: StreamOptions) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Averaged rates of the extra IMUs on the primary's kept samples (own error draws, no drops/jitter)."""
+    """Averaged rates of the extra IMUs on the primary's kept samples (own error draws, no drops/jitter);
+    those of the run (generate(imus=...), with its faults) when it has them."""
     if not 1 <= opts.imus <= 3:
         raise ValueError(f"imus must be 1..3, got {opts.imus}")
+    if len(run.extra) >= opts.imus - 1:
+        dt_kept = np.diff(np.concatenate(([run.exact.t0], run.exact.t)))[run.kept][:, None]
+        return [(dth / dt_kept, dv / dt_kept) for dth, dv in run.extra[: opts.imus - 1]]
     model = dataclasses.replace(errors.grade(run.grade), jitter_sigma=0.0, drop_probability=0.0)
     dt = np.diff(np.concatenate(([run.exact.t0], run.exact.t)))[:, None]
     out = []
