@@ -870,7 +870,6 @@ def _add_analyze(sub: argparse._SubParsersAction) -> None:
 
 
 def _cmd_analyze(args: argparse.Namespace) -> int:
-    from . import files
     from sim.scenarios import ScenarioError, load
 
     try:
@@ -878,10 +877,11 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
     except (ScenarioError, UnicodeDecodeError, OSError) as exc:
         print(f"mavins analyze: error: {_scenario_error(args.scenario, exc)}", file=sys.stderr)
         return EXIT_USAGE
+    from sim.generate import check_size
+
     from .analysis import AnalysisOptions, run_analyze
     from .core import covariance
     from .parallel import JobError
-    from sim.generate import check_size
 
     try:
         keys = _imu_spec(args, covariance.ANALYSIS_KEYS)

@@ -11,7 +11,7 @@ One function, :func:`run_jobs`, is the project's way to map a job over items
   ``jobs=1`` runs every job in this process, one after the other (no pickling,
   easiest to debug).
 * ``cluster="tcp://host:8786"`` submits the jobs to a running Dask distributed
-  scheduler instead (``pip install mavins[cluster]``); ``jobs`` is then
+  scheduler instead (OSError when it cannot be reached within CONNECT_TIMEOUT_S) (``pip install mavins[cluster]``); ``jobs`` is then
   ignored: the cluster's workers decide. Every worker must be able to import
   the module of ``func`` (install mavins there).
 * Results come back as a list in item order, whatever the order the jobs
@@ -37,6 +37,8 @@ from concurrent.futures import FIRST_EXCEPTION, Future, ProcessPoolExecutor, wai
 from typing import TypeVar
 
 from .progress import Progress
+
+CONNECT_TIMEOUT_S = 10.0  # how long to wait for a Dask scheduler before giving up
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -134,7 +136,7 @@ def _run_dask(func: Callable[[T], R], items: list[T], address: str, label: str) 
     except ImportError as exc:
         raise ImportError("--cluster needs Dask distributed: pip install 'mavins[cluster]'") from exc
     results: list[R | None] = [None] * len(items)
-    with Client(address) as client:
+    with Client(address, timeout=CONNECT_TIMEOUT_S) as client:
         futures = client.map(func, items, pure=False)
         index = {fut.key: i for i, fut in enumerate(futures)}
         try:

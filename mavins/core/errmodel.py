@@ -453,8 +453,17 @@ def transition(F: np.ndarray, T: float) -> np.ndarray:
 @kernel
 def discretise(F: np.ndarray, spec: np.ndarray, T: float) -> tuple[np.ndarray, np.ndarray]:
     """``(Phi, Qd)`` over a step of T seconds (trapezoidal Qd, module docstring)."""
+    return discretise_density(F, noise_density(spec), T)
+
+
+@kernel
+def discretise_density(F: np.ndarray, q: np.ndarray, T: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(Phi, Qd)`` over T seconds for white-noise densities ``q`` (diagonal of G Qc G^T, one per state).
+
+    ``Phi = I + F T + (F T)^2 / 2``, ``Qd = (Phi Qc Phi^T + Qc) T / 2`` (module
+    docstring; any state size, so the error analysis' augmented model uses it too).
+    """
     phi = transition(F, T)
-    q = noise_density(spec)
     n = F.shape[0]
     pq = phi.copy()
     for i in range(n):

@@ -26,3 +26,30 @@ def north_east_error(lat: float, lon: float, lat_ref: float, lon_ref: float) -> 
     reference point's radii (small offsets: metres to kilometres)."""
     r_n, r_e = earth.radii(lat_ref)
     return (lat - lat_ref) * r_n, (lon - lon_ref) * r_e * math.cos(lat_ref)
+
+
+def nav_errors(sol: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """Errors (estimate minus truth) of solution rows against truth rows, both in the contract's
+    solution columns (file units: degrees); returns (n, 9): position N, E, D (m), velocity N, E, D
+    (m/s), attitude phi N, E, D (rad).
+
+    Attitude: the contract's ``C_b^n(true) = (I - [phi x]) C_b^n(est)``, i.e.
+    ``q(est) = q(phi) (x) q(true)`` and phi the rotation vector of ``q(est) (x) q(true)^*``.
+    Position: ``dp_N = (R_N + h) dL``, ``dp_E = (R_E + h) cos L dlambda``, ``dp_D = -dh`` with the
+    radii of the true position (errmodel.py's definitions).
+    """
+    qe = sol[:, 10:14]
+    qt = truth[:, 10:14] * np.array([1.0, -1.0, -1.0, -1.0])
+    w = qe[:, 0] * qt[:, 0] - np.sum(qe[:, 1:] * qt[:, 1:], axis=1)
+    vec = qe[:, :1] * qt[:, 1:] + qt[:, :1] * qe[:, 1:] + np.cross(qe[:, 1:], qt[:, 1:])
+    sign = np.where(w < 0.0, -1.0, 1.0)
+    w, vec = w * sign, vec * sign[:, None]
+    norm = np.linalg.norm(vec, axis=1)
+    scale = np.where(norm > 1e-12, 2.0 * np.arctan2(norm, w) / np.maximum(norm, 1e-300), 2.0 / w)
+    lat = np.radians(truth[:, 1])
+    h = truth[:, 3]
+    r_n, r_e = np.vectorize(earth.radii)(lat)
+    dp = np.column_stack([np.radians(sol[:, 1] - truth[:, 1]) * (r_n + h),
+                          np.radians(sol[:, 2] - truth[:, 2]) * (r_e + h) * np.cos(lat),
+                          -(sol[:, 3] - truth[:, 3])])
+    return np.column_stack([dp, sol[:, 4:7] - truth[:, 4:7], vec * scale[:, None]])

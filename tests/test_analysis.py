@@ -1,0 +1,334 @@
+"""Error analysis (`mavins analyze`, core/covariance.py, mavins/analysis.py) against closed forms.
+
+Free-inertial error propagation at rest on the equator (L = 0), level, heading
+north, vertical channel held (CONVENTIONS.md ``--vertical hold``). With the
+error model of core/errmodel.py (Groves 2nd ed. 14.2.4) the north channel is,
+with x = north position error, phi_E, phi_D the attitude errors,
+``w_s^2 = g / (R_N + h)`` and Omega the Earth rate (horizontal at L = 0):
+
+    x''    = -g phi_E + b_N                     (velocity row, f^n = [0, 0, -g])
+    phi_E' =  Omega phi_D + x' / R - eps_E      (-[w_ie x] phi, transport rate)
+    phi_D' = -Omega phi_E + Omega x / R         (Earth rate seen through dL)
+
+which gives ``x'''' + (w_s^2 + Omega^2) x'' + w_s^2 Omega^2 x = forcing``: the
+Schuler and 24 h modes, ``(s^2 + w_s^2)(s^2 + Omega^2) = 0`` (Titterton &
+Weston, *Strapdown Inertial Navigation Technology*, 2nd ed., 2004, ch. 12,
+error propagation of the stationary system, where the Foucault term
+``Omega sin L`` vanishes at the equator; Britting, *Inertial Navigation Systems
+Analysis*, 1971, the same single-channel equations). From rest:
+
+* accelerometer bias b (measured = true + b) along north:
+  ``x(t) = (b / w_s^2)(1 - cos w_s t)`` exactly (the 24 h mode is not
+  excited: the initial conditions give its coefficient 0): amplitude
+  ``b R / g``, period ``2 pi sqrt(R / g)`` (84.4 min for R = 6371 km,
+  g = 9.80665);
+* gyro bias eps about east (measured = true + eps):
+  ``x(t) = -g eps / (w_s^2 - Omega^2) [sin(Omega t)/Omega - sin(w_s t)/w_s]``,
+  which is ``-R eps (t - sin(w_s t)/w_s)`` (the single-channel Schuler
+  response) while ``Omega t << 1``, and ``-g eps t^3 / 6`` at first
+  (a nose-up attitude error tilts gravity into -north). After 4 h the Earth-rate
+  coupling (24 h term) makes it 17 % smaller than the single-channel form.
+
+Tolerances. The acceptance bands are the issue's (amplitude 2 %, period 1 %,
+gyro response 5 %). What theory leaves between the closed form and the two
+implementations is far below them: the linearisation's neglected terms are
+of relative size |phi| (below 1e-3 rad here: b/g = 1e-3 for 1 mg), the
+radius and gravity change over a position error of 13 km is 13 km / R = 2e-3
+of their values (and enters the period as half of that), and at rest the
+strapdown integrates exactly; the covariance's second-order transition matrix
+over 1 s steps errs by (w_s T)^3 / 6 = 3e-10 per step. So each check also
+asserts the tighter band 0.5 %, which these terms cannot reach (the values
+measured are in docs/analysis.md).
+
+Covariance against Monte Carlo: with N runs of a Gaussian error of standard
+deviation sigma, ``(N - 1) s^2 / sigma^2`` is chi-square with N - 1 degrees of
+freedom, so s / sigma lies in ``[sqrt(chi2_lo / (N-1)), sqrt(chi2_hi / (N-1))]``
+with the chosen probability (quantiles by Wilson and Hilferty's cube-root
+approximation, J. Wilson, M. Hilferty, PNAS 17, 1931, accurate to 1e-3 for
+these degrees of freedom). The band is set for a joint false-failure
+probability of 1e-3 over all compared values (Bonferroni).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mavins import analysis as an
+from mavins.cli import main
+from mavins.core import covariance as cov
+from mavins.core import errmodel as em
+from mavins.core.runner import navigate
+from sim import errors
+from sim.scenarios import load
+
+A_WGS = 6378137.0
+F_WGS = 1.0 / 298.257223563
+E2 = F_WGS * (2.0 - F_WGS)
+OMEGA = 7.292115e-5
+G_EQ = 9.7803253359  # normal gravity at the equator, h = 0 (CONVENTIONS.md)
+R_N_EQ = A_WGS * (1.0 - E2)  # meridian radius at the equator
+MG = 9.80665e-3
+DEG_PER_H = math.pi / 180.0 / 3600.0
+
+HOURS = 4.0
+RATE = 10.0
+EQUATOR_TOML = f"""
+description = "at rest on the equator, level, heading north"
+[start]
+lat = 0.0
+lon = 0.0
+h = 0.0
+yaw = 0.0
+[imu]
+rate = {RATE}
+duration = {HOURS * 3600.0}
+[[segments]]
+kind = "static"
+duration = {HOURS * 3600.0}
+"""
+
+
+@pytest.fixture(scope="module")
+def equator(tmp_path_factory: pytest.TempPathFactory) -> object:
+    path = tmp_path_factory.mktemp("scn") / "equator.toml"
+    path.write_text(EQUATOR_TOML)
+    return load(str(path))
+
+
+def north_error(sol: np.ndarray, lat0_deg: float) -> np.ndarray:
+    """North position error (m) of solution rows at rest: (L - L0)(R_N + h), R_N at the equator."""
+    return np.radians(sol[:, 1] - lat0_deg) * R_N_EQ
+
+
+def strapdown_north_error(scenario: object, model: errors.ImuErrorModel) -> tuple[np.ndarray, np.ndarray]:
+    """(t from start, north error) of the nonlinear strapdown at 1 s, vertical held."""
+    exact = an.exact_run(scenario, HOURS * 3600.0, RATE)
+    t, dth, dv, _ = errors.apply(model, exact.t, exact.dtheta, exact.dv, 0, t_start=exact.t0)
+    sol = navigate(t, dth, dv, exact.init(), samples=2, vertical="hold")
+    sol = sol[int(RATE / 2) - 1 :: int(RATE / 2)]  # 1 s rows
+    return sol[:, 0] - exact.t0, north_error(sol, exact.truth[0, 1])
+
+
+def fit_schuler(t: np.ndarray, x: np.ndarray) -> tuple[float, float]:
+    """(amplitude, period) of x(t) = c0 + c1 cos(w t) + c2 sin(w t), least squares over w (s)."""
+
+    def resid(w: float) -> tuple[float, float]:
+        a = np.column_stack([np.ones_like(t), np.cos(w * t), np.sin(w * t)])
+        coef, *_ = np.linalg.lstsq(a, x, rcond=None)
+        return float(np.sum((a @ coef - x) ** 2)), float(math.hypot(coef[1], coef[2]))
+
+    w0 = 2.0 * math.pi / 5064.0
+    grid = np.linspace(0.8 * w0, 1.2 * w0, 801)
+    best = grid[int(np.argmin([resid(w)[0] for w in grid]))]
+    lo, hi = best - 0.4 * w0 / 800, best + 0.4 * w0 / 800
+    for _ in range(60):  # golden-section refinement
+        m1, m2 = lo + 0.382 * (hi - lo), lo + 0.618 * (hi - lo)
+        if resid(m1)[0] < resid(m2)[0]:
+            hi = m2
+        else:
+            lo = m1
+    w = 0.5 * (lo + hi)
+    return resid(w)[1], 2.0 * math.pi / w
+
+
+def schuler_expected() -> tuple[float, float]:
+    """(b R/g, 2 pi sqrt(R/g)) on the equator for 1 mg: R = R_N + h, g the normal gravity there."""
+    ws2 = G_EQ / R_N_EQ
+    return MG / ws2, 2.0 * math.pi / math.sqrt(ws2)
+
+
+def check_schuler(amp: float, period: float) -> None:
+    amp_exp, per_exp = schuler_expected()
+    assert abs(amp / amp_exp - 1.0) < 0.005
+    assert abs(period / per_exp - 1.0) < 0.005
+    # The issue's bands, with the textbook's round figures (R = 6371 km, g = 9.80665 m/s^2).
+    assert abs(amp / (MG * 6371e3 / 9.80665) - 1.0) < 0.02
+    assert abs(period / (84.4 * 60.0) - 1.0) < 0.01
+
+
+def test_schuler_oscillation_from_an_accelerometer_bias_strapdown(equator: object) -> None:
+    model = errors.ImuErrorModel(accel=errors.SensorErrorModel(bias=(MG, 0.0, 0.0)))
+    t, x = strapdown_north_error(equator, model)
+    amp, period = fit_schuler(t, x)
+    check_schuler(amp, period)
+    # b > 0 along north: the estimate accelerates north, x = +A (1 - cos).
+    assert x[int(np.argmin(abs(t - period / 2)))] == pytest.approx(2.0 * amp, rel=0.01)
+
+
+def test_schuler_oscillation_from_an_accelerometer_bias_covariance(equator: object) -> None:
+    exact = an.exact_run(equator, HOURS * 3600.0, RATE)
+    track = cov.track_means(exact.t0, exact.t, exact.dtheta, exact.dv, exact.truth, int(RATE))
+    spec = cov.AnalysisSpec(em.ImuSpec(accel_bias=MG))
+    P = cov.propagate(track, spec, vertical="hold")["accel_bias"]
+    sigma_n = cov.sigma_rows(P)[:, 0]
+    amp, period = fit_schuler(track.t - track.t[0], sigma_n)
+    check_schuler(amp, period)
+
+
+def gyro_closed_form(t: np.ndarray, eps: float) -> np.ndarray:
+    """North error from an east gyro bias eps (module docstring), R = R_N, g at the equator."""
+    ws2 = G_EQ / R_N_EQ
+    ws = math.sqrt(ws2)
+    return -G_EQ * eps / (ws2 - OMEGA**2) * (np.sin(OMEGA * t) / OMEGA - np.sin(ws * t) / ws)
+
+
+def check_gyro_response(t: np.ndarray, x: np.ndarray) -> None:
+    ref = gyro_closed_form(t, 0.01 * DEG_PER_H)
+    late = t >= 1800.0  # from half an hour on (before, the error is a few metres)
+    rel = np.abs(x[late] / ref[late] - 1.0)
+    assert rel.max() < 0.005
+    assert rel.max() < 0.05  # the issue's band
+    # Without the Earth-rate coupling the 4 h value would be off by far more than the band.
+    single = -(R_N_EQ * 0.01 * DEG_PER_H) * (t[-1] - math.sin(math.sqrt(G_EQ / R_N_EQ) * t[-1]) / math.sqrt(G_EQ / R_N_EQ))
+    assert abs(x[-1] / single - 1.0) > 0.10
+
+
+def test_gyro_bias_position_growth_strapdown(equator: object) -> None:
+    model = errors.ImuErrorModel(gyro=errors.SensorErrorModel(bias=(0.0, 0.01 * DEG_PER_H, 0.0)))
+    t, x = strapdown_north_error(equator, model)
+    assert t[-1] == pytest.approx(HOURS * 3600.0)
+    check_gyro_response(t, x)
+
+
+def test_gyro_bias_position_growth_covariance(equator: object) -> None:
+    exact = an.exact_run(equator, HOURS * 3600.0, RATE)
+    track = cov.track_means(exact.t0, exact.t, exact.dtheta, exact.dv, exact.truth, int(RATE))
+    eps = 0.01 * DEG_PER_H
+    east_only = cov.Source("east gyro bias", (em.X_BG + 1,), (eps**2,), (0.0,) * 10)
+    P = cov.propagate(track, cov.AnalysisSpec(em.ImuSpec()), vertical="hold", only=east_only)["east gyro bias"]
+    t = track.t - track.t[0]
+    check_gyro_response(t, -cov.sigma_rows(P)[:, 0])  # sigma = |x|, x < 0 here
+
+
+# --- covariance against Monte Carlo -------------------------------------------------------------
+
+
+def chi_band(dof: int, p_two_sided: float) -> tuple[float, float]:
+    """Band of s / sigma for a sample sigma with ``dof`` degrees of freedom (Wilson-Hilferty quantiles)."""
+    from statistics import NormalDist
+
+    z = NormalDist().inv_cdf(1.0 - p_two_sided / 2.0)
+    k = 2.0 / (9.0 * dof)
+
+    def q(zz: float) -> float:  # chi2 quantile / dof
+        return (1.0 - k + zz * math.sqrt(k)) ** 3
+
+    return math.sqrt(q(-z)), math.sqrt(q(z))
+
+
+MC_RUNS = 300
+MC_SPEC = {  # small biases, large scale factors and misalignments: the augmented states dominate
+    "gyro_arw": 0.05, "gyro_bias": 2.0, "accel_vrw": 0.02, "accel_bias": 2e-3,
+    "gyro_scale": 3000.0, "accel_scale": 3000.0, "gyro_misalignment": 600.0, "accel_misalignment": 600.0,
+}
+
+
+@pytest.fixture(scope="module")
+def flight_short() -> object:
+    return load("flight")
+
+
+def test_covariance_matches_monte_carlo(flight_short: object) -> None:
+    opts = an.AnalysisOptions(runs=MC_RUNS, jobs=2, duration=120.0, rate=50.0, vertical="free", every=1.0)
+    spec = cov.spec_from_keys(MC_SPEC)
+    result = an.analyze(flight_short, spec, opts)
+    # Every source contributes: the scale factors and misalignments are not negligible.
+    total = result.budget["total"]
+    for name in ("gyro_scale", "gyro_misalignment", "accel_scale", "accel_misalignment"):
+        assert np.max(result.budget[name] / total) > 0.1, name
+    times = [30, 60, 90, 120]
+    rows = [int(np.argmin(abs(result.t - result.t[0] - s))) for s in times]
+    cols = range(9)
+    lo, hi = chi_band(MC_RUNS - 1, 1e-3 / (len(rows) * len(cols)))
+    ratio = result.montecarlo[rows][:, cols] / result.covariance[rows][:, cols]
+    assert np.all((ratio > lo) & (ratio < hi)), (lo, hi, ratio)
+
+
+def test_jobs_and_dask_cluster_give_identical_numbers(flight_short: object) -> None:
+    spec = cov.spec_from_grade("tactical")
+    base = an.AnalysisOptions(runs=6, jobs=1, duration=20.0, rate=50.0, seed=7)
+    one = an.analyze(flight_short, spec, base)
+    two = an.analyze(flight_short, spec, an.AnalysisOptions(**{**base.__dict__, "jobs": 2}))
+    assert np.array_equal(one.montecarlo, two.montecarlo)
+    assert np.all(one.montecarlo[1:] > 0.0)
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as lc:
+        remote = an.analyze(flight_short, spec, an.AnalysisOptions(**{**base.__dict__, "cluster": lc.scheduler_address}))
+    assert np.array_equal(one.montecarlo, remote.montecarlo)
+    other_seed = an.analyze(flight_short, spec, an.AnalysisOptions(**{**base.__dict__, "seed": 8}))
+    assert not np.array_equal(one.montecarlo, other_seed.montecarlo)
+
+
+def test_budget_sums_to_the_full_propagation(flight_short: object) -> None:
+    """The sources' covariances add up to one propagation of all states together (linearity)."""
+    spec = cov.spec_from_keys(MC_SPEC | {"gyro_bias_instability": 5.0, "gyro_bias_tau": 100.0,
+                                         "accel_bias_instability": 1e-3, "accel_bias_tau": 100.0})
+    exact = an.exact_run(flight_short, 30.0, 50.0)
+    track = cov.track_means(exact.t0, exact.t, exact.dtheta, exact.dv, exact.truth, 5)
+    parts = cov.propagate(track, spec, every=10)
+    srcs = cov.sources(spec)
+    states = tuple(sorted({s for src in srcs for s in src.states}))
+    p0 = {s: v for src in srcs for s, v in zip(src.states, src.p0) if v > 0}
+    q = np.zeros(9 + len(states))
+    for src in srcs:
+        ix = list(range(9)) + [9 + states.index(s) for s in src.states]
+        q[ix] += np.array(src.q)
+    everything = cov.Source("all", states, tuple(p0.get(s, 0.0) for s in states), tuple(q))
+    full = cov.propagate(track, spec, every=10, only=everything)["all"]
+    summed = sum(parts.values())
+    assert np.allclose(full, summed, rtol=1e-9, atol=1e-15 * np.abs(full).max())
+    assert summed[-1, 6, 6] > 0.0
+
+
+# --- command line ----------------------------------------------------------------------------------
+
+
+def test_cli_writes_the_contract_files(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "out"
+    code = main(["analyze", "flight", "--runs", "3", "--jobs", "1", "--duration", "5", "--rate", "50", "-o", str(out)])
+    assert code == 0
+    printed = capsys.readouterr().out
+    assert "total (covariance)" in printed and "Monte Carlo (3 runs)" in printed
+    for name in ("covariance.csv", "montecarlo.csv"):
+        lines = (out / name).read_text().splitlines()
+        assert lines[0] == "t,sigma_n,sigma_e,sigma_d,sigma_vn,sigma_ve,sigma_vd,sigma_att_n,sigma_att_e,sigma_att_d"
+        assert len(lines) == 1 + 6  # t = 0..5 s
+    budget = (out / "budget.csv").read_text().splitlines()
+    assert budget[0] == "source,pos_h,pos_v,vel_h,att_level,att_yaw"
+    assert [r.split(",")[0] for r in budget[1:]] == list(cov.SOURCES) + ["total"]
+    png = (out / "analysis.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["nosuch"], "no such scenario"),
+        (["flight", "--imu-spec", "SPEC", "--duration", "5"], "unknown keys gyro_scalefactor"),
+        (["flight", "--imu-spec", "NEG", "--duration", "5"], "must be non-negative"),
+        (["flight", "--duration", "0.5", "--rate", "50"], "shorter than one output interval"),
+    ],
+)
+def test_cli_bad_input_exits_2_and_writes_nothing(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                  args: list[str], message: str) -> None:
+    (tmp_path / "SPEC").write_text("gyro_scalefactor = 10.0\n")
+    (tmp_path / "NEG").write_text("gyro_scale = -1.0\n")
+    out = tmp_path / "out"
+    args = [str(tmp_path / a) if a in ("SPEC", "NEG") else a for a in args]
+    code = main(["analyze", *args, "--runs", "2", "--jobs", "1", "-o", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert len(err) == 1 and err[0].startswith("mavins analyze: error: ") and message in err[0], err
+    assert not out.exists()
+
+
+def test_cli_output_that_is_a_file_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    target = tmp_path / "file"
+    target.write_text("keep")
+    assert main(["analyze", "flight", "--runs", "2", "--duration", "2", "-o", str(target)]) == 2
+    assert "expected a directory" in capsys.readouterr().err
+    assert target.read_text() == "keep"
