@@ -45,28 +45,10 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from . import errmodel as em
 from . import kalman as kf
 from . import strapdown as sd
-from .errmodel import (
-    NX,
-    SP_ACC_GM,
-    SP_ACC_TAU,
-    SP_GYRO_ARW,
-    SP_GYRO_GM,
-    SP_GYRO_RRW,
-    SP_GYRO_TAU,
-    X_BA,
-    X_BG,
-    X_DP,
-    X_DV,
-    X_GA,
-    X_GG,
-    X_PHI,
-    ImuSpec,
-    discretise,
-    make_spec,
-    system_matrix,
-)
+from .errmodel import NX
 from .jit import kernel
 from .runner import initial_state
 
@@ -117,8 +99,8 @@ def _propagate(s: np.ndarray, cfg: np.ndarray, spec: np.ndarray, P: np.ndarray, 
             c[i, j] = acc[3 * i + j] / T
     f_n = acc[9:12] / T
     lat, lon, h = sd.position(s, cfg)
-    F = system_matrix(c, s[sd.S_V : sd.S_V + 3], lat, h, f_n, spec, cfg[sd.CFG_EARTH] > 0.5)
-    phi, qd = discretise(F, spec, T)
+    F = em.system_matrix(c, s[sd.S_V : sd.S_V + 3], lat, h, f_n, spec, cfg[sd.CFG_EARTH] > 0.5)
+    phi, qd = em.discretise(F, spec, T)
     kf.predict(P, phi, qd)
     for i in range(13):
         acc[i] = 0.0
@@ -154,12 +136,12 @@ def after_k_update(s: np.ndarray, cfg: np.ndarray, spec: np.ndarray, P: np.ndarr
     acc[12] += T
     for a in range(6):
         sums[a] = 0.0
-    if spec[SP_GYRO_GM] > 0.0:
-        e = np.exp(-T / spec[SP_GYRO_TAU])
+    if spec[em.SP_GYRO_GM] > 0.0:
+        e = np.exp(-T / spec[em.SP_GYRO_TAU])
         for a in range(3):
             bias[kf.B_GG + a] *= e
-    if spec[SP_ACC_GM] > 0.0:
-        e = np.exp(-T / spec[SP_ACC_TAU])
+    if spec[em.SP_ACC_GM] > 0.0:
+        e = np.exp(-T / spec[em.SP_ACC_TAU])
         for a in range(3):
             bias[kf.B_GA + a] *= e
     if int(s[sd.S_NK]) % predict_every == 0:
@@ -218,14 +200,14 @@ def _record(
 def filter_row(P: np.ndarray, bias: np.ndarray, out: np.ndarray) -> None:
     """Write the 21 filter columns (kernel units) after the 14 solution columns of ``out``."""
     for i in range(3):
-        out[14 + i] = np.sqrt(P[X_DP + i, X_DP + i])
-        out[17 + i] = np.sqrt(P[X_DV + i, X_DV + i])
-        out[20 + i] = np.sqrt(P[X_PHI + i, X_PHI + i])
+        out[14 + i] = np.sqrt(P[em.X_DP + i, em.X_DP + i])
+        out[17 + i] = np.sqrt(P[em.X_DV + i, em.X_DV + i])
+        out[20 + i] = np.sqrt(P[em.X_PHI + i, em.X_PHI + i])
         out[23 + i] = bias[kf.B_BG + i] + bias[kf.B_GG + i]
         out[26 + i] = bias[kf.B_BA + i] + bias[kf.B_GA + i]
-        g, a = X_BG + i, X_GG + i
+        g, a = em.X_BG + i, em.X_GG + i
         out[29 + i] = np.sqrt(max(P[g, g] + P[a, a] + 2.0 * P[g, a], 0.0))
-        g, a = X_BA + i, X_GA + i
+        g, a = em.X_BA + i, em.X_GA + i
         out[32 + i] = np.sqrt(max(P[g, g] + P[a, a] + 2.0 * P[g, a], 0.0))
 
 
@@ -282,7 +264,7 @@ def run_aided(
     iz = 0
     while iz < static.shape[0] and static[iz, 1] < t_start:
         iz += 1
-    gm_g = spec[SP_GYRO_GM] > 0.0
+    gm_g = spec[em.SP_GYRO_GM] > 0.0
     acc = np.zeros(13)
     sums = np.zeros(7)
     sums[6] = s[sd.S_T]
@@ -357,13 +339,13 @@ def run_aided(
                 _propagate(s, cfg, spec, P, acc)
                 sig = static[iz, 3]
                 if not sig > 0.0:
-                    sig = spec[SP_GYRO_ARW] / np.sqrt(raw_t)
+                    sig = spec[em.SP_GYRO_ARW] / np.sqrt(raw_t)
                 nu, H, R = kf.zaru(s, cfg, bias, raw_sum / raw_t, sig)
                 # the window mean differs from the bias at its end by the bias's own walk:
                 # variance (2 sigma_gm^2 / tau + K^2) T / 3 per axis over a window of T
-                walk = spec[SP_GYRO_RRW] ** 2
+                walk = spec[em.SP_GYRO_RRW] ** 2
                 if gm_g:
-                    walk += 2.0 * spec[SP_GYRO_GM] ** 2 / spec[SP_GYRO_TAU]
+                    walk += 2.0 * spec[em.SP_GYRO_GM] ** 2 / spec[em.SP_GYRO_TAU]
                 for a in range(3):
                     R[a, a] += walk * raw_t / 3.0
                 nis, ratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate)
@@ -426,7 +408,7 @@ def navigate_aided(
     *,
     mag: np.ndarray | None = None,
     static: np.ndarray | Sequence[Sequence[float]] | None = None,
-    spec: str | ImuSpec | Mapping[str, float] = "consumer",
+    spec: str | em.ImuSpec | Mapping[str, float] = "consumer",
     lever_arm: Sequence[float] = (0.0, 0.0, 0.0),
     gate: float = 5.0,
     samples: int = 2,
@@ -476,7 +458,7 @@ def navigate_aided(
     cfg = sd.make_config(samples=samples, **options)
     if predict_every < 1:
         raise ValueError("predict_every must be >= 1")
-    sp = make_spec(spec, baro_drift)
+    sp = em.make_spec(spec, baro_drift)
     s = initial_state(init)
     imu = np.asarray(imu, dtype=np.float64)
     if imu.ndim != 2 or imu.shape[1] != 7:

@@ -51,11 +51,12 @@ from .errmodel import (
     X_GA,
     X_GG,
     X_PHI,
+    _set_skew,
     matmul,
     matmul_bt,
 )
 from .jit import kernel
-from .rotation import mat3_mul_s, mat_vec, quat_mul_s, quat_to_dcm_s, rotvec_to_dcm_s, rotvec_to_quat_s, wrap_pi
+from .rotation import mat3_mul_s, mat_vec, quat_mul_s, quat_to_dcm_s, rotvec_to_dcm_s, rotvec_to_quat_s, skew, wrap_pi
 
 B_BG = 0
 B_BA = 3
@@ -278,13 +279,7 @@ def gnss_position(
     nu[1] = wrap_pi(lon - lon_m) * me + la[1] - s[sd.S_V + 1] * dt
     nu[2] = -(h - h_m) + la[2] - s[sd.S_V + 2] * dt
     H = np.zeros((3, NX))
-    # -[la x]
-    H[0, X_PHI + 1] = la[2]
-    H[0, X_PHI + 2] = -la[1]
-    H[1, X_PHI] = -la[2]
-    H[1, X_PHI + 2] = la[0]
-    H[2, X_PHI] = la[1]
-    H[2, X_PHI + 1] = -la[0]
+    _set_skew(H, 0, X_PHI, la, -1.0)
     for i in range(3):
         H[i, X_DV + i] = -dt
         H[i, X_DP + i] = 1.0
@@ -326,20 +321,9 @@ def gnss_velocity(
         v_tm = s[sd.S_V + i] - a * (s[sd.S_V + i] - s[sd.S_VP + i])
         nu[i] = v_tm + cwl[i] - v_m[i]
     H = np.zeros((3, NX))
-    H[0, X_PHI + 1] = cwl[2]
-    H[0, X_PHI + 2] = -cwl[1]
-    H[1, X_PHI] = -cwl[2]
-    H[1, X_PHI + 2] = cwl[0]
-    H[2, X_PHI] = cwl[1]
-    H[2, X_PHI + 1] = -cwl[0]
+    _set_skew(H, 0, X_PHI, cwl, -1.0)
     # C [l x]
-    lx = np.zeros((3, 3))
-    lx[0, 1] = -lever[2]
-    lx[0, 2] = lever[1]
-    lx[1, 0] = lever[2]
-    lx[1, 2] = -lever[0]
-    lx[2, 0] = -lever[1]
-    lx[2, 1] = lever[0]
+    lx = skew(lever)
     for i in range(3):
         H[i, X_DV + i] = 1.0
         for j in range(3):
