@@ -12,6 +12,8 @@ import sys
 from pathlib import Path
 from typing import Callable, Sequence
 
+from .argcheck import checked
+
 EXIT_USAGE = 2
 
 
@@ -40,16 +42,14 @@ class _Range:
 
     def __call__(self, text: str) -> int | float:
         noun = "a whole number" if self.kind is int else "a number"
-        try:
-            v = self.kind(str(text).strip())
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected {noun}, {self.describe()}; got {text!r}") from None
+        return checked(text, lambda t: self.kind(str(t).strip()), self._inside, f"{noun}, {self.describe()}",
+                       self.describe())
+
+    def _inside(self, v: int | float) -> bool:
         bad = self.kind is float and not math.isfinite(v)
         bad = bad or (self.lo is not None and (v <= self.lo if self.lo_open else v < self.lo))
         bad = bad or (self.hi is not None and v > self.hi)
-        if bad:
-            raise argparse.ArgumentTypeError(f"{text} is outside the allowed range {self.describe()}")
-        return v
+        return not bad
 
 
 def _positive_int(lo: int, hi: int | None = None) -> _Range:
@@ -80,14 +80,8 @@ class _Heading:
 
     def __call__(self, text: str) -> str:
         text = str(text).strip()
-        if text in self.words:
-            return text
-        try:
-            v = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected {self.describe()}; got {text!r}") from None
-        if not (math.isfinite(v) and -360.0 <= v <= 360.0):
-            raise argparse.ArgumentTypeError(f"{text} is outside the allowed range {self.describe()}")
+        if text not in self.words:
+            checked(text, float, lambda v: math.isfinite(v) and -360.0 <= v <= 360.0, self.describe(), self.describe())
         return text
 
 
@@ -102,14 +96,8 @@ class _Speed:
 
     def __call__(self, text: str) -> str:
         text = str(text).strip()
-        if text == "max":
-            return text
-        try:
-            v = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected {self.describe()}; got {text!r}") from None
-        if not (math.isfinite(v) and v > 0):
-            raise argparse.ArgumentTypeError(f"{text} is outside the allowed range {self.describe()}")
+        if text != "max":
+            checked(text, float, lambda v: math.isfinite(v) and v > 0, self.describe(), self.describe())
         return text
 
 

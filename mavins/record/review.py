@@ -31,6 +31,8 @@ import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
+from ..argcheck import checked
+
 PACKAGES = "xvfb mesa-vulkan-drivers libvulkan1"
 INSTALL_HINT = f"install them with: apt-get install -y {PACKAGES} (or scripts/install_viewer_deps.sh)"
 ICD_DIRS = ("/usr/share/vulkan/icd.d", "/etc/vulkan/icd.d", "/usr/local/share/vulkan/icd.d")
@@ -360,14 +362,16 @@ class _Size:
         return f"W in {MIN_SIZE[0]}..{MAX_SIZE[0]}, H in {MIN_SIZE[1]}..{MAX_SIZE[1]}"
 
     def __call__(self, text: str) -> tuple[int, int]:
-        try:
-            w, h = str(text).lower().split("x")
-            size = int(w), int(h)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, e.g. 1600x900, not {text!r}") from None
-        if not (MIN_SIZE[0] <= size[0] <= MAX_SIZE[0] and MIN_SIZE[1] <= size[1] <= MAX_SIZE[1]):
-            raise argparse.ArgumentTypeError(f"{text} is outside the allowed range {self.describe()}")
-        return size
+        return checked(text, self._parse, self._inside, "WIDTHxHEIGHT, e.g. 1600x900", self.describe())
+
+    @staticmethod
+    def _parse(text: str) -> tuple[int, int]:
+        w, h = str(text).lower().split("x")
+        return int(w), int(h)
+
+    @staticmethod
+    def _inside(size: tuple[int, int]) -> bool:
+        return MIN_SIZE[0] <= size[0] <= MAX_SIZE[0] and MIN_SIZE[1] <= size[1] <= MAX_SIZE[1]
 
 
 class _Seconds:
@@ -382,13 +386,8 @@ class _Seconds:
     def __call__(self, text: str) -> float:
         import math
 
-        try:
-            v = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a number, {self.describe()}; got {text!r}") from None
-        if not (math.isfinite(v) and v > 0):
-            raise argparse.ArgumentTypeError(f"{text} is outside the allowed range {self.describe()}")
-        return v
+        return checked(text, float, lambda v: math.isfinite(v) and v > 0, f"a number, {self.describe()}",
+                       self.describe())
 
 
 _size = _Size()
