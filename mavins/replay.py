@@ -1,9 +1,15 @@
 """``mavins replay``: a recorded log through the live pipeline, as fast as it goes.
 
 Logs: MAVLink .tlog (every message as received), ArduPilot DataFlash .bin
-(IMU messages) and PX4 .ulg (``sensor_combined``, interval-averaged rates).
-DataFlash and ULog samples are turned into HIGHRES_IMU frames and parsed back,
-so they take exactly the path a live message takes.
+(``IMU``, ``GPS``/``GPA``, ``BARO``, ``MAG``) and PX4 .ulg (``sensor_combined``
+with interval-averaged rates; ``vehicle_gps_position`` or ``sensor_gps``;
+``vehicle_air_data`` or ``sensor_baro``; ``vehicle_magnetometer`` or
+``sensor_mag``). DataFlash and ULog rows are turned into the MAVLink messages a
+live autopilot would send (HIGHRES_IMU with its magnetometer fields,
+GPS_RAW_INT, SCALED_PRESSURE), stamped on the log's own (IMU) clock, packed and
+parsed back, so they take exactly the path a live message takes and the
+pipeline's GNSS/baro/magnetometer handling aids the solution (docs/real-data.md
+"Aided replay"). A tlog carries these messages already.
 
 Bad input (docs/reliability.md, "Offline tools on bad input"): a file that
 cannot be what its name says (empty, another format, no IMU message of the
@@ -16,6 +22,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import math
 import mmap
 import struct
 from collections import Counter
@@ -27,12 +34,15 @@ from . import files
 from .core.records import Solution
 from .engine import EngineConfig
 from .files import FOUND, DataFileError, SolutionWriter, sniff
-from .link.ingest import IMU_MESSAGES, IngestConfig
+from .link.ingest import HIGHRES_ACC_GYRO, HIGHRES_MAG, IMU_MESSAGES, IngestConfig
 from .link.mavlink import mavlink
-from .pipeline import Pipeline
+from .pipeline import GNSS_MESSAGES, Pipeline
 from .progress import Progress
 
 DF_HEAD = b"\xa3\x95"
+AIDING_MESSAGES = (*GNSS_MESSAGES, "SCALED_PRESSURE")
+NO_GNSS = ("note: no GNSS message in the log (GPS_RAW_INT, GPS_INPUT, HIL_GPS; PX4 vehicle_gps_position/"
+           "sensor_gps, ArduPilot GPS): the position is free inertial")
 KINDS = {".tlog": "a MAVLink telemetry log (.tlog)", ".bin": "an ArduPilot DataFlash log (.bin)",
          ".ulg": "a PX4 ULog (.ulg)"}
 
@@ -46,6 +56,7 @@ class LogReport:
     skipped: list[list] = field(default_factory=list)  # [first byte, bytes, sensor time before (s) or None]
     cut_at: int | None = None  # first byte of an incomplete last record
     notes: list[str] = field(default_factory=list)
+    rejected: Counter = field(default_factory=Counter)  # aiding records no MAVLink message can carry, by kind
 
     def skip(self, start: int, length: int) -> None:
         if length <= 0:
@@ -80,6 +91,9 @@ class LogReport:
         if self.cut_at is not None:
             out.append(f"{self.path}: the log ends early: its last record, from byte {self.cut_at} to the end "
                        f"({self.size - self.cut_at} bytes), is incomplete (a cut or unfinished file)")
+        if self.rejected:
+            out.append(f"{self.path}: left out {_counts(self.rejected)} record(s) whose values no MAVLink "
+                       "message can carry (out of range or not finite)")
         out += [f"{self.path}: {n}" for n in self.notes]
         return out
 
@@ -94,6 +108,7 @@ class ReplayResult:
     report: LogReport | None = None
     t_first: float | None = None  # sensor time of the first and last accepted IMU sample
     t_last: float | None = None
+    aiding: Counter = field(default_factory=Counter)  # GNSS and baro messages fed to the pipeline, by type
 
 
 # -- format checks ----------------------------------------------------------------------------
@@ -153,14 +168,144 @@ def _decoder() -> mavlink.MAVLink:
     return p
 
 
-def _highres(enc: mavlink.MAVLink, dec: mavlink.MAVLink, t_us: int, acc: tuple, gyr: tuple,
-             imu_id: int) -> mavlink.MAVLink_message:
-    """A HIGHRES_IMU frame of one logged sample, packed and decoded as a live one would be."""
-    m = enc.highres_imu_encode(t_us, float(acc[0]), float(acc[1]), float(acc[2]), float(gyr[0]), float(gyr[1]),
-                               float(gyr[2]), 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0b111111, imu_id)
+def _frame(enc: mavlink.MAVLink, dec: mavlink.MAVLink, m: mavlink.MAVLink_message) -> mavlink.MAVLink_message:
+    """A message packed and decoded as a live one would be (raises on values its fields cannot hold)."""
     buf = m.pack(enc)
     enc.seq = (enc.seq + 1) % 256
     return dec.decode(bytearray(buf))
+
+
+def _highres(enc: mavlink.MAVLink, dec: mavlink.MAVLink, t_us: int, acc: tuple, gyr: tuple,
+             imu_id: int, mag: tuple | None = None) -> mavlink.MAVLink_message:
+    """A HIGHRES_IMU frame of one logged sample (m/s^2, rad/s, FRD; ``mag`` in gauss, FRD, or None)."""
+    fields = HIGHRES_ACC_GYRO | (HIGHRES_MAG if mag is not None else 0)
+    mx, my, mz = (float(v) for v in mag) if mag is not None else (0.0, 0.0, 0.0)
+    m = enc.highres_imu_encode(t_us, float(acc[0]), float(acc[1]), float(acc[2]), float(gyr[0]), float(gyr[1]),
+                               float(gyr[2]), mx, my, mz, 0.0, 0.0, 0.0, 0.0, fields, imu_id)
+    return _frame(enc, dec, m)
+
+
+# -- aiding records as MAVLink messages ---------------------------------------------------------
+
+PACK_ERRORS = (ValueError, OverflowError, TypeError, struct.error)  # a value a message field cannot hold
+UINT16_UNKNOWN = 65535  # GPS_RAW_INT eph/epv/vel/cog: "If unknown, set to: UINT16_MAX"
+
+
+def _int(v: float, lo: int, hi: int, unknown: int | None = None) -> int:
+    """A finite value rounded to an integer field's range; ``unknown`` (or an error) for NaN and values outside."""
+    x = float(v)
+    if math.isfinite(x) and lo <= round(x) <= hi:
+        return round(x)
+    if unknown is None:
+        raise ValueError(f"{v!r} outside [{lo}, {hi}]")
+    return unknown
+
+
+def gps_raw_int(enc: mavlink.MAVLink, dec: mavlink.MAVLink, t_us: int, fix_type: int, lat_deg: float,
+                lon_deg: float, alt_msl_m: float, alt_ellipsoid_m: float | None, h_acc_m: float, v_acc_m: float,
+                vel_m_s: float, cog_deg: float, vel_acc_m_s: float, hdop: float, vdop: float,
+                satellites: int) -> mavlink.MAVLink_message:
+    """A GPS_RAW_INT of one logged fix, stamped ``t_us`` on the log's IMU clock.
+
+    Field units (MAVLink common.xml GPS_RAW_INT): lat/lon degE7, alt and
+    alt_ellipsoid mm, eph/epv HDOP/VDOP x 100, vel cm/s, cog cdeg, h_acc/v_acc
+    mm, vel_acc mm/s. Accuracies unknown (NaN, 0) are sent as 0, which the
+    pipeline reads as "not given" (its default 1-sigma). Raises ValueError for
+    a position or time no field can hold.
+    """
+    big = 2**32 - 1
+    m = enc.gps_raw_int_encode(
+        _int(t_us, 0, 2**64 - 1), _int(fix_type, 0, 255),
+        _int(lat_deg * 1e7, -2**31, 2**31 - 1), _int(lon_deg * 1e7, -2**31, 2**31 - 1),
+        _int(alt_msl_m * 1e3, -2**31, 2**31 - 1),
+        _int(hdop * 100.0, 0, UINT16_UNKNOWN, UINT16_UNKNOWN), _int(vdop * 100.0, 0, UINT16_UNKNOWN, UINT16_UNKNOWN),
+        _int(vel_m_s * 100.0, 0, UINT16_UNKNOWN - 1, UINT16_UNKNOWN),
+        _int((cog_deg % 360.0) * 100.0, 0, 35999, UINT16_UNKNOWN) if math.isfinite(cog_deg) else UINT16_UNKNOWN,
+        _int(satellites, 0, 255, 255),
+        _int(alt_ellipsoid_m * 1e3, -2**31, 2**31 - 1, 0) if alt_ellipsoid_m is not None else 0,
+        _int(h_acc_m * 1e3, 0, big, 0), _int(v_acc_m * 1e3, 0, big, 0), _int(vel_acc_m_s * 1e3, 0, big, 0),
+    )
+    return _frame(enc, dec, m)
+
+
+def scaled_pressure(enc: mavlink.MAVLink, dec: mavlink.MAVLink, t_us: int, pressure_pa: float,
+                    temperature_c: float) -> mavlink.MAVLink_message:
+    """A SCALED_PRESSURE of one logged static pressure (Pa), stamped ``t_us`` on the IMU clock.
+
+    MAVLink common.xml SCALED_PRESSURE: time_boot_ms ms, press_abs hPa (= Pa / 100), temperature cdegC.
+    Raises ValueError for a pressure that is not finite and positive.
+    """
+    p = float(pressure_pa)
+    if not (math.isfinite(p) and p > 0.0):
+        raise ValueError(f"pressure {pressure_pa!r} Pa")
+    temp = _int(temperature_c * 100.0, -32768, 32767, 0)
+    m = enc.scaled_pressure_encode(_int(t_us // 1000, 0, 2**32 - 1), p / 100.0, 0.0, temp)
+    return _frame(enc, dec, m)
+
+
+def _col(d: dict, name: str, i: int, default: float = math.nan) -> float:
+    """Row ``i`` of a ULog field as a float, or ``default`` when the log's message version lacks it."""
+    return float(d[name][i]) if name in d else default
+
+
+def ulog_gps(enc: mavlink.MAVLink, dec: mavlink.MAVLink, d: dict, i: int) -> mavlink.MAVLink_message:
+    """GPS_RAW_INT of row ``i`` of PX4's ``vehicle_gps_position`` / ``sensor_gps`` (``d``: field -> array).
+
+    Field names and units (PX4 msg/vehicle_gps_position.msg, sensor_gps.msg):
+    up to v1.13 ``lat``/``lon`` int32 1e-7 deg, ``alt``/``alt_ellipsoid`` int32
+    mm; from v1.14 ``latitude_deg``/``longitude_deg`` float64 deg and
+    ``altitude_msl_m``/``altitude_ellipsoid_m`` float64 m. ``eph``/``epv``
+    (m, 1-sigma position accuracy), ``s_variance_m_s`` (m/s, speed accuracy),
+    ``vel_m_s`` (m/s), ``cog_rad`` (rad), ``fix_type`` (GPS_FIX_TYPE numbers),
+    ``timestamp`` (us, the IMU's boot clock). The mapping to GPS_RAW_INT is the
+    one PX4's own MAVLink module uses for its GPS_RAW_INT stream: h_acc = eph,
+    v_acc = epv, vel_acc = s_variance_m_s, the eph/epv fields = HDOP/VDOP x 100.
+    """
+    if "latitude_deg" in d:
+        lat, lon = _col(d, "latitude_deg", i), _col(d, "longitude_deg", i)
+        alt, alt_e = _col(d, "altitude_msl_m", i), _col(d, "altitude_ellipsoid_m", i)
+    else:
+        lat, lon = _col(d, "lat", i) * 1e-7, _col(d, "lon", i) * 1e-7  # int32 1e-7 deg
+        alt, alt_e = _col(d, "alt", i) * 1e-3, _col(d, "alt_ellipsoid", i, 0.0) * 1e-3  # int32 mm
+    return gps_raw_int(enc, dec, int(d["timestamp"][i]), int(_col(d, "fix_type", i, 0.0)), lat, lon, alt,
+                       alt_e if alt_e else None, _col(d, "eph", i), _col(d, "epv", i), _col(d, "vel_m_s", i),
+                       math.degrees(_col(d, "cog_rad", i)), _col(d, "s_variance_m_s", i), _col(d, "hdop", i),
+                       _col(d, "vdop", i), int(_col(d, "satellites_used", i, 255.0)))
+
+
+PA_PER_HPA = 100.0
+HPA_MAX = 2000.0  # a static pressure below this is in hPa (mbar): 2000 Pa is about 27 km up (ICAO Doc 7488)
+
+
+def ulog_baro(enc: mavlink.MAVLink, dec: mavlink.MAVLink, topic: str, d: dict, i: int) -> mavlink.MAVLink_message:
+    """SCALED_PRESSURE of row ``i`` of PX4's ``vehicle_air_data`` or ``sensor_baro``.
+
+    PX4 msg/vehicle_air_data.msg: ``baro_pressure_pa`` (Pa), ``baro_temp_celcius``
+    (degC), ``timestamp_sample`` (us, when the sensor sampled). msg/sensor_baro.msg:
+    ``pressure`` in millibar (hPa) up to v1.12 and in Pa from v1.13, told apart
+    by its size (HPA_MAX); ``temperature`` (degC).
+    """
+    t = int(d["timestamp_sample"][i]) if "timestamp_sample" in d else int(d["timestamp"][i])
+    if topic == "vehicle_air_data":
+        return scaled_pressure(enc, dec, t, _col(d, "baro_pressure_pa", i), _col(d, "baro_temp_celcius", i))
+    p = _col(d, "pressure", i)
+    return scaled_pressure(enc, dec, t, p * PA_PER_HPA if p < HPA_MAX else p, _col(d, "temperature", i))
+
+
+ULOG_GPS = ("vehicle_gps_position", "sensor_gps")
+ULOG_BARO = ("vehicle_air_data", "sensor_baro")
+ULOG_MAG = {"vehicle_magnetometer": ("magnetometer_ga[0]", "magnetometer_ga[1]", "magnetometer_ga[2]"),
+            "sensor_mag": ("x", "y", "z")}  # gauss, body FRD (PX4 msg/vehicle_magnetometer.msg, sensor_mag.msg)
+
+
+def _ulog_topic(ulog: object, names: tuple[str, ...] | dict, fields: tuple[str, ...] = ()) -> tuple[str, dict] | None:
+    """The first of ``names`` the log holds with data (instance 0) and the ``fields``, as (name, field -> array)."""
+    for name in names:
+        for d in ulog.data_list:  # type: ignore[attr-defined]
+            if d.name == name and d.multi_id == 0 and len(d.data.get("timestamp", ())) > 0 \
+                    and all(f in d.data for f in fields):
+                return name, d.data
+    return None
 
 
 class _Stuck(Exception):
@@ -224,7 +369,7 @@ def _ulog_messages(path: Path, report: LogReport) -> Iterator[tuple[float, mavli
     try:
         with open(path, "rb") as raw, contextlib.redirect_stdout(chatter):
             tracked = _ReadTracker(raw)
-            ulog = ULog(tracked, ["sensor_combined"])  # type: ignore[arg-type]
+            ulog = ULog(tracked, ["sensor_combined", *ULOG_GPS, *ULOG_BARO, *ULOG_MAG])  # type: ignore[arg-type]
     except MemoryError:
         raise files.ResourceError(f"{path}: not enough memory to read this ULog") from None
     except Exception as exc:  # pyulog raises plain exceptions on bad files
@@ -252,10 +397,44 @@ def _ulog_messages(path: Path, report: LogReport) -> Iterator[tuple[float, mavli
     n = len(ts)
     enc = mavlink.MAVLink(None, srcSystem=1, srcComponent=mavlink.MAV_COMP_ID_AUTOPILOT1)
     dec = _decoder()
+    gps = _ulog_topic(ulog, ULOG_GPS, ("timestamp", "fix_type"))
+    baro = _ulog_topic(ulog, ULOG_BARO)
+    mag = _ulog_topic(ulog, ULOG_MAG)
+    if mag is not None and not all(k in mag[1] for k in ULOG_MAG[mag[0]]):
+        mag = None
+    # aiding rows in the order their topics were published (``timestamp``, us): (time, 0 = GPS / 1 = baro, row)
+    events = [(int(t), 0, j) for j, t in enumerate(gps[1]["timestamp"])] if gps is not None else []
+    events += [(int(t), 1, j) for j, t in enumerate(baro[1]["timestamp"])] if baro is not None else []
+    events.sort()
+    mag_t = mag[1]["timestamp"] if mag is not None else ()
+    mag_xyz = tuple(mag[1][k] for k in ULOG_MAG[mag[0]]) if mag is not None else ()
+
+    def aiding(k: int, j: int) -> mavlink.MAVLink_message:
+        if k == 0:
+            return ulog_gps(enc, dec, gps[1], j)  # type: ignore[index]
+        return ulog_baro(enc, dec, baro[0], baro[1], j)  # type: ignore[index]
 
     def messages() -> Iterator[tuple[float, mavlink.MAVLink_message]]:
+        e = m = 0
+        held: tuple | None = None  # the latest magnetometer sample (gauss), carried by every later IMU frame
         for i in range(n):
-            yield (i + 1) / n, _highres(enc, dec, int(ts[i]), (ax[i], ay[i], az[i]), (gx[i], gy[i], gz[i]), 0)
+            t = int(ts[i])
+            while e < len(events) and events[e][0] <= t:  # what was published before this IMU sample
+                _, k, j = events[e]
+                e += 1
+                try:
+                    msg = aiding(k, j)
+                except PACK_ERRORS:  # a value no field can hold (NaN position, negative time, ...)
+                    report.rejected[(gps if k == 0 else baro)[0]] += 1  # type: ignore[index]
+                else:
+                    yield i / n, msg
+            while m < len(mag_t) and int(mag_t[m]) <= t:
+                held = (mag_xyz[0][m], mag_xyz[1][m], mag_xyz[2][m])
+                m += 1
+            if held is not None and not all(math.isfinite(float(v)) for v in held):
+                report.rejected[mag[0]] += 1  # type: ignore[index]
+                held = None
+            yield (i + 1) / n, _highres(enc, dec, t, (ax[i], ay[i], az[i]), (gx[i], gy[i], gz[i]), 0, held)
 
     return messages()
 
@@ -295,18 +474,91 @@ def _imu_layout(fmt: str, columns: str) -> tuple[struct.Struct, int, int, list[i
     return unpack, it, scale, gyr, acc, inst
 
 
+DF_AIDING = {"GPS": ("Status", "Lat", "Lng", "Alt"), "GPA": ("HAcc", "VAcc"), "BARO": ("Press",),
+             "MAG": ("MagX", "MagY", "MagZ")}  # the columns each aiding record needs (ArduPilot LogStructure.h)
+DF_HUNDREDTHS = "cCeE"  # format characters stored as value * 100 (AP_Logger/LogStructure.h)
+
+
+def _aiding_layout(name: str, fmt: str, columns: str) -> tuple[struct.Struct, dict[str, int], int] | None:
+    """How to read a GPS/GPA/BARO/MAG record of this FMT: (unpacker, column -> index, time scale to us)."""
+    if not fmt or any(c not in DF_STRUCT for c in fmt):
+        return None
+    cols = columns.split(",")
+    if len(cols) != len(fmt) or any(k not in cols for k in DF_AIDING[name]):
+        return None
+    try:
+        unpack = struct.Struct("<" + "".join(DF_STRUCT[c] for c in fmt))
+    except struct.error:
+        return None
+    if "TimeUS" in cols:
+        scale = 1
+    elif "TimeMS" in cols:
+        scale = 1000
+    else:
+        return None
+    index = {k: i for i, k in enumerate(cols)}
+    index["_time"] = index["TimeUS" if scale == 1 else "TimeMS"]
+    if any(fmt[i] in "aNnZ" for k, i in index.items() if k in (*DF_AIDING[name], "_time", "I")):
+        return None
+    return unpack, index, scale
+
+
+def _df_value(v: tuple, fmt: str, index: dict[str, int], name: str, default: float = math.nan) -> float:
+    """Column ``name`` of an unpacked record in the unit of its scaled format character
+    (``c C e E``: the log stores value * 100; LogStructure.h), or ``default`` if absent."""
+    if name not in index:
+        return default
+    i = index[name]
+    return float(v[i]) / 100.0 if fmt[i] in DF_HUNDREDTHS else float(v[i])
+
+
+def df_gps(enc: mavlink.MAVLink, dec: mavlink.MAVLink, t_us: int, gps: dict[str, float],
+           gpa: dict[str, float] | None) -> mavlink.MAVLink_message:
+    """GPS_RAW_INT of an ArduPilot ``GPS`` record (and its ``GPA``, if logged), values already in the
+    units of the format characters: Status (AP_GPS::GPS_Status, the numbering of MAVLink
+    GPS_FIX_TYPE), Lat/Lng (1e-7 deg, format L), Alt (m AMSL, format e), Spd (m/s), GCrs (deg),
+    HDop; GPA HAcc/VAcc (m, format C), SAcc (m/s), VDop. The GPS record has no ellipsoidal height:
+    the pipeline adds its geoid height (``EngineConfig.geoid_height``, 0 in replay) to the AMSL altitude."""
+    acc = gpa or {}
+    return gps_raw_int(enc, dec, t_us, int(gps["Status"]), gps["Lat"] * 1e-7, gps["Lng"] * 1e-7, gps["Alt"], None,
+                       acc.get("HAcc", math.nan), acc.get("VAcc", math.nan), gps.get("Spd", math.nan),
+                       gps.get("GCrs", math.nan), acc.get("SAcc", math.nan), gps.get("HDop", math.nan),
+                       acc.get("VDop", math.nan), int(gps.get("NSats", 255)))
+
+
 def _bin_messages(path: Path, report: LogReport) -> Iterator[tuple[float, mavlink.MAVLink_message]]:
-    """IMU records of an ArduPilot DataFlash log, as HIGHRES_IMU messages.
+    """IMU, GPS (with GPA), BARO and MAG records of an ArduPilot DataFlash log, as HIGHRES_IMU (with the
+    latest magnetometer sample), GPS_RAW_INT and SCALED_PRESSURE messages; instance 0 of GPS, BARO
+    and MAG, every IMU instance (the ingest selects one).
 
     Records are found by their header (A3 95, type) and the length their FMT
     gives; bytes that are no record are skipped to the next header and
     reported, and a record cut off by the end of the file is reported too.
+    A GPS record waits for the GPA record ArduPilot writes after it (same time)
+    for its accuracies, and goes out at the next IMU record at the latest.
     """
     enc = mavlink.MAVLink(None, srcSystem=1, srcComponent=mavlink.MAV_COMP_ID_AUTOPILOT1)
     dec = _decoder()
     size = report.size
     lengths = {DF_FMT_TYPE: DF_FMT_LEN}
     imu: dict[int, tuple] = {}
+    aid: dict[int, tuple[str, str, struct.Struct, dict[str, int], int]] = {}
+    pending: tuple[int, int, dict[str, float]] | None = None  # a GPS record waiting for its GPA: (time us, offset, values)
+    held: tuple[float, float, float] | None = None  # the latest magnetometer sample (gauss)
+
+    def gps_out(gpa: dict[str, float] | None) -> Iterator[tuple[float, mavlink.MAVLink_message]]:
+        nonlocal pending
+        if pending is None:
+            return
+        t_us, at, values = pending
+        pending = None
+        try:
+            msg = df_gps(enc, dec, t_us, values, gpa)
+        except PACK_ERRORS:  # a value no GPS_RAW_INT field can hold
+            report.rejected["GPS"] += 1
+        else:
+            yield at / size, msg
+
     with open(path, "rb") as fh, mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) as mm:
         off = 0
         while off < size:
@@ -315,13 +567,13 @@ def _bin_messages(path: Path, report: LogReport) -> Iterator[tuple[float, mavlin
                     report.cut_at = off
                 else:
                     report.skip(off, size - off)
-                return
+                break
             typ = mm[off + 2]
             if mm[off] == 0xA3 and mm[off + 1] == 0x95 and typ in lengths:
                 ln = lengths[typ]
                 if off + ln > size:
                     report.cut_at = off
-                    return
+                    break
                 if typ == DF_FMT_TYPE:
                     new, length, name, fmt, cols = DF_FMT.unpack_from(mm, off + 3)
                     name_s = name.split(b"\0", 1)[0].decode("ascii", "replace")
@@ -337,22 +589,51 @@ def _bin_messages(path: Path, report: LogReport) -> Iterator[tuple[float, mavlin
                         imu[new] = layout
                     else:
                         imu.pop(new, None)
+                    alayout = _aiding_layout(name_s, fmt_s, cols_s) if name_s in DF_AIDING else None
+                    if alayout is not None and alayout[0].size + 3 == length:
+                        aid[new] = (name_s, fmt_s, *alayout)
+                    else:
+                        aid.pop(new, None)
                 elif typ in imu:
+                    yield from gps_out(None)
                     unpack, it, scale, gyr, acc, inst = imu[typ]
                     v = unpack.unpack_from(mm, off + 3)
                     try:
                         msg = _highres(enc, dec, int(v[it]) * scale, tuple(v[i] for i in acc),
-                                       tuple(v[i] for i in gyr), int(v[inst]) if inst is not None else 0)
+                                       tuple(v[i] for i in gyr), int(v[inst]) if inst is not None else 0, held)
                     except Exception:  # a value no HIGHRES_IMU can carry (negative time, instance > 255)
                         report.skip(off, ln)
                     else:
                         yield off / size, msg
+                elif typ in aid:
+                    name_s, fmt_s, unpack, index, scale = aid[typ]
+                    v = unpack.unpack_from(mm, off + 3)
+                    if int(_df_value(v, fmt_s, index, "I", 0.0)) == 0:
+                        t_us = int(v[index["_time"]]) * scale
+                        values = {k: _df_value(v, fmt_s, index, k) for k in index if k not in ("_time", "I")}
+                        if name_s == "GPS":
+                            yield from gps_out(None)
+                            pending = (t_us, off, values)
+                        elif name_s == "GPA":
+                            if pending is not None and pending[0] == t_us:
+                                yield from gps_out(values)
+                        elif name_s == "BARO":  # Press in Pa, Temp in degC (BARO: units "P", "O")
+                            try:
+                                msg = scaled_pressure(enc, dec, t_us, values["Press"], values.get("Temp", math.nan))
+                            except PACK_ERRORS:
+                                report.rejected["BARO"] += 1
+                            else:
+                                yield off / size, msg
+                        else:  # MAG: int16 milligauss (units "G" with multiplier "C" = 1e-3; AP_Compass LogStructure.h)
+                            xyz = (values["MagX"] * 1e-3, values["MagY"] * 1e-3, values["MagZ"] * 1e-3)
+                            held = xyz if any(xyz) else None
                 off += ln
                 continue
             nxt = mm.find(DF_HEAD, off + 1)
             nxt = size if nxt < 0 else nxt
             report.skip(off, nxt - off)
             off = nxt
+        yield from gps_out(None)
 
 
 def _tlog_messages(path: Path, report: LogReport) -> Iterator[tuple[float, mavlink.MAVLink_message]]:
@@ -448,6 +729,7 @@ def replay(
     pipeline: Pipeline | None = None
     n_msg = n_out = 0
     t_first: float | None = None
+    aiding: Counter = Counter()
     with files.atomic_outputs([out_csv, rerun]) as (tmp_csv, tmp_rrd):
         writer = None
         try:
@@ -463,6 +745,9 @@ def replay(
                     n_msg += 1
                     if len(report.skipped) != n_skips:  # where: the sensor time just before the damage
                         n_skips = _locate(report, n_skips, pipeline)
+                    name = msg.get_type()
+                    if name in AIDING_MESSAGES:
+                        aiding[name] += 1
                     out: Solution | None = pipeline.handle(msg)
                     if out is not None:
                         n_out += 1
@@ -476,6 +761,8 @@ def replay(
                     if n_msg % 2000 == 0:
                         bar.update(frac)
                 _locate(report, n_skips, pipeline)  # damage after the last message
+                if not any(aiding[k] for k in GNSS_MESSAGES):
+                    report.notes.append(NO_GNSS)
                 bar.update(1.0)
         finally:
             if writer is not None:
@@ -487,7 +774,7 @@ def replay(
         if n_out == 0:
             raise DataFileError(_no_solution(path, engine_cfg, pipeline, t_first))
     last = pipeline.last_sample
-    return ReplayResult(n_msg, n_out, pipeline, report, t_first, last.t if last is not None else None)
+    return ReplayResult(n_msg, n_out, pipeline, report, t_first, last.t if last is not None else None, aiding)
 
 
 def _locate(report: LogReport, done: int, pipeline: Pipeline) -> int:
