@@ -76,27 +76,35 @@ DEG_PER_H = math.pi / 180.0 / 3600.0
 
 HOURS = 4.0
 RATE = 10.0
-EQUATOR_TOML = f"""
-description = "at rest on the equator, level, heading north"
-[start]
-lat = 0.0
-lon = 0.0
-h = 0.0
-yaw = 0.0
-[imu]
-rate = {RATE}
-duration = {HOURS * 3600.0}
-[[segments]]
-kind = "static"
-duration = {HOURS * 3600.0}
-"""
+
+
+class AtRest:
+    """Exact increments and truth at rest on the equator, level, heading north (closed form).
+
+    ``w_ib^b = C_n^b w_ie^n = [Omega, 0, 0]`` and ``f^b = -g^n = [0, 0, -gamma]``
+    (CONVENTIONS.md Earth model: plumb-bob gravity, so at rest f = -g); the
+    truth never changes. The same numbers as the simulator's ``static``
+    segment there, without its 100 Hz internal integration of four hours.
+    """
+
+    def __init__(self, hours: float, rate: float) -> None:
+        n = round(hours * 3600.0 * rate)
+        self.t0 = 0.0
+        self.t = np.arange(1, n + 1) / rate
+        dt = np.diff(self.t, prepend=0.0)[:, None]
+        self.dtheta = np.array([OMEGA, 0.0, 0.0]) * dt
+        self.dv = np.array([0.0, 0.0, -G_EQ]) * dt
+        self.truth = np.zeros((n + 1, 14))
+        self.truth[:, 0] = np.concatenate(([0.0], self.t))
+        self.truth[:, 10] = 1.0
+
+    def init(self) -> dict[str, float]:
+        return {"t": 0.0, "lat": 0.0, "lon": 0.0, "h": 0.0, "vn": 0.0, "ve": 0.0, "vd": 0.0, "roll": 0.0, "pitch": 0.0, "yaw": 0.0}
 
 
 @pytest.fixture(scope="module")
-def equator(tmp_path_factory: pytest.TempPathFactory) -> object:
-    path = tmp_path_factory.mktemp("scn") / "equator.toml"
-    path.write_text(EQUATOR_TOML)
-    return load(str(path))
+def equator() -> AtRest:
+    return AtRest(HOURS, RATE)
 
 
 def north_error(sol: np.ndarray, lat0_deg: float) -> np.ndarray:
@@ -104,9 +112,8 @@ def north_error(sol: np.ndarray, lat0_deg: float) -> np.ndarray:
     return np.radians(sol[:, 1] - lat0_deg) * R_N_EQ
 
 
-def strapdown_north_error(scenario: object, model: errors.ImuErrorModel) -> tuple[np.ndarray, np.ndarray]:
+def strapdown_north_error(exact: AtRest, model: errors.ImuErrorModel) -> tuple[np.ndarray, np.ndarray]:
     """(t from start, north error) of the nonlinear strapdown at 1 s, vertical held."""
-    exact = an.exact_run(scenario, HOURS * 3600.0, RATE)
     t, dth, dv, _ = errors.apply(model, exact.t, exact.dtheta, exact.dv, 0, t_start=exact.t0)
     sol = navigate(t, dth, dv, exact.init(), samples=2, vertical="hold")
     sol = sol[int(RATE / 2) - 1 :: int(RATE / 2)]  # 1 s rows
@@ -150,7 +157,7 @@ def check_schuler(amp: float, period: float) -> None:
     assert abs(period / (84.4 * 60.0) - 1.0) < 0.01
 
 
-def test_schuler_oscillation_from_an_accelerometer_bias_strapdown(equator: object) -> None:
+def test_schuler_oscillation_from_an_accelerometer_bias_strapdown(equator: AtRest) -> None:
     model = errors.ImuErrorModel(accel=errors.SensorErrorModel(bias=(MG, 0.0, 0.0)))
     t, x = strapdown_north_error(equator, model)
     amp, period = fit_schuler(t, x)
@@ -159,8 +166,8 @@ def test_schuler_oscillation_from_an_accelerometer_bias_strapdown(equator: objec
     assert x[int(np.argmin(abs(t - period / 2)))] == pytest.approx(2.0 * amp, rel=0.01)
 
 
-def test_schuler_oscillation_from_an_accelerometer_bias_covariance(equator: object) -> None:
-    exact = an.exact_run(equator, HOURS * 3600.0, RATE)
+def test_schuler_oscillation_from_an_accelerometer_bias_covariance(equator: AtRest) -> None:
+    exact = equator
     track = cov.track_means(exact.t0, exact.t, exact.dtheta, exact.dv, exact.truth, int(RATE))
     spec = cov.AnalysisSpec(em.ImuSpec(accel_bias=MG))
     P = cov.propagate(track, spec, vertical="hold")["accel_bias"]
@@ -187,15 +194,15 @@ def check_gyro_response(t: np.ndarray, x: np.ndarray) -> None:
     assert abs(x[-1] / single - 1.0) > 0.10
 
 
-def test_gyro_bias_position_growth_strapdown(equator: object) -> None:
+def test_gyro_bias_position_growth_strapdown(equator: AtRest) -> None:
     model = errors.ImuErrorModel(gyro=errors.SensorErrorModel(bias=(0.0, 0.01 * DEG_PER_H, 0.0)))
     t, x = strapdown_north_error(equator, model)
     assert t[-1] == pytest.approx(HOURS * 3600.0)
     check_gyro_response(t, x)
 
 
-def test_gyro_bias_position_growth_covariance(equator: object) -> None:
-    exact = an.exact_run(equator, HOURS * 3600.0, RATE)
+def test_gyro_bias_position_growth_covariance(equator: AtRest) -> None:
+    exact = equator
     track = cov.track_means(exact.t0, exact.t, exact.dtheta, exact.dv, exact.truth, int(RATE))
     eps = 0.01 * DEG_PER_H
     east_only = cov.Source("east gyro bias", (em.X_BG + 1,), (eps**2,), (0.0,) * 10)
