@@ -110,12 +110,5 @@ def run_nav_fdi(imu_paths: Sequence[Path], init_path: Path, out_path: Path, fdi_
 
 
 def strapdown_keywords(opts: Any) -> dict[str, Any]:
-    """The ``strapdown.make_config`` keywords of ``mavins nav``'s options (NavOptions: its ``strapdown``
-    settings where it has them, else its fields named as on the command line)."""
-    settings = getattr(opts, "strapdown", None)
-    if settings is not None:
-        return dict(settings.keywords())
-    return {"samples": opts.samples, "attitude": opts.attitude, "order": opts.order, "earth_model": opts.earth,
-            "orthonormalize_every": opts.orthonormalize_every, "vertical": opts.vertical,
-            "coning": not opts.no_coning, "position": opts.position, "l_every": opts.l_every,
-            "imu_rates": opts.imu_rates}
+    """The ``strapdown.make_config`` keywords of ``mavins nav``'s options (NavOptions)."""
+    return dict(opts.strapdown.keywords())
