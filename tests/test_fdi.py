@@ -216,3 +216,33 @@ def test_false_alarms_over_ten_hours_agree_with_the_design_probability() -> None
             # (correlation 50 s, 9 processes, about half the variance after the tracker) adds a
             # realised-variance error near sqrt(2 x 50 / 36000 / 9) x 0.5 x 6 = 0.05: 0.2 is four sd.
             assert abs(np.mean(stats[full, 1]) - 6.0) < 0.2, part.name
+
+
+def test_dodecahedron_gyros_isolate_each_single_failure_and_detect_two() -> None:
+    from mavins.core import redundancy as rd
+    from mavins.core.fdi import ParityMonitor
+
+    run = generate(load("static"), duration=20.0, rate=100.0, seed=1)
+    axes = rd.dodecahedron_axes()
+    spec = spec_from_grade("industrial")
+    sigma = rd.window_sigma(spec.gyro_arw, 0.5, 60.0, spec.gyro_gm, spec.gyro_tau, spec.gyro_rrw)
+    t = run.exact.t
+    dt = np.diff(np.concatenate(([run.exact.t0], t)))
+
+    def events(faulted: tuple[int, ...]) -> list:
+        step = faults.Fault("step", 0, "gyro", 0, 12.0, math.inf, math.radians(0.2))
+        m = faults.skewed_gyros(run.exact.t0, t, run.exact.dtheta, axes, "industrial", seed=9,
+                                faults=tuple((j, step) for j in faulted))
+        mon = ParityMonitor(axes, sigma, window=50, window_s=0.5, false_alarm=1e-6)
+        return mon.process(t, m, dt)[1]
+
+    # 0.2 deg/s = 3.5e-3 rad/s against a window sigma of 1.5e-4 rad/s (industrial: random walk
+    # 9.9e-5 rad/sqrt(s) over 0.5 s, plus the tracked bias terms): |v_j|^2 = 1/2 gives a non-centrality
+    # of (3.5e-3 / 1.5e-4)^2 / 2 = 270 over a threshold of 31: seen in the first window after 12 s
+    for j in range(6):
+        ev = events((j,))
+        assert [(e.event, e.index) for e in ev] == [("detected", -1), ("isolated", j)]
+        assert 12.0 < ev[0].t <= 12.5 + 1e-9
+    for pair in ((0, 1), (2, 5), (3, 4)):
+        ev = events(pair)
+        assert ev and ev[0].event == "detected" and 12.0 < ev[0].t <= 12.5 + 1e-9
