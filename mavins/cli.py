@@ -132,9 +132,17 @@ def _add_nav(sub: argparse._SubParsersAction) -> None:
     p.add_argument("imu", type=Path, nargs="+", metavar="IMU.csv",
                    help="increments (t,dtheta_*,dv_*) or rates (t,gyro_*,acc_*); several files (same times, "
                         "same body frame) are monitored and fused first (docs/redundancy.md)")
-    p.add_argument("--init", type=Path, required=True, metavar="INIT.json", help="initial state JSON")
-    p.add_argument("-o", "--output", type=Path, required=True, metavar="NAV.csv", help="solution CSV to write")
+    p.add_argument("--init", type=Path, metavar="INIT.json",
+                   help="initial state JSON (required, except with --each: then each file's own init.json)")
+    p.add_argument("-o", "--output", type=Path, required=True, metavar="NAV.csv",
+                   help="solution CSV (or .parquet) to write; with --each a folder")
     p.add_argument("--input", choices=("increments", "rates"), default="increments", help="what the IMU file holds")
+    b = p.add_argument_group("batch (many files, each on its own)")
+    b.add_argument("--each", action="store_true",
+                   help="navigate every IMU file on its own (not fused): each solution goes to "
+                        "OUTPUT/<folder>/<name>.nav.csv, a bad file is reported and the others go on")
+    b.add_argument("--jobs", type=_positive_int(1, 1024), default=None, metavar="N",
+                   help="with --each: worker processes (default: every core)")
     _strapdown_options(p)
     g = p.add_argument_group("aided navigation (with --gnss and/or --baro; docs/filter.md)")
     g.add_argument("--gnss", type=Path, metavar="GNSS.csv",
@@ -267,6 +275,14 @@ def _cmd_nav(args: argparse.Namespace) -> int:
     from .core.settings import strapdown_from_options
 
     opts = NavOptions(input=args.input, strapdown=strapdown_from_options(args), timing=args.timing)
+    if args.each:
+        return _cmd_nav_each(args, opts)
+    if args.jobs is not None:
+        print("mavins nav: error: --jobs goes with --each (several files, each navigated on its own)", file=sys.stderr)
+        return EXIT_USAGE
+    if args.init is None:
+        print("mavins nav: error: --init INIT.json is required (the initial state)", file=sys.stderr)
+        return EXIT_USAGE
     try:
         if len(args.imu) > 1 or args.fdi_log is not None:
             return _cmd_nav_fdi(args, opts)
@@ -286,6 +302,33 @@ def _cmd_nav(args: argparse.Namespace) -> int:
         return EXIT_USAGE
     print(f"mavins nav: wrote {rows} solution rows to {args.output}", file=sys.stderr)
     return 0
+
+
+def _cmd_nav_each(args: argparse.Namespace, opts: object) -> int:
+    """``mavins nav --each A.csv B.csv ... -o DIR``: a batch on every core; exit 2 if any file failed."""
+    from . import files
+    from .nav import run_nav_batch
+
+    bad = [name for name, v in (("--gnss", args.gnss), ("--baro", args.baro), ("--fdi-log", args.fdi_log))
+           if v is not None]
+    if bad:
+        print(f"mavins nav: error: --each navigates free inertial; {', '.join(bad)} cannot go with it",
+              file=sys.stderr)
+        return EXIT_USAGE
+    try:
+        results = run_nav_batch(args.imu, args.init, args.output, opts, jobs=args.jobs)  # type: ignore[arg-type]
+    except (files.DataFileError, files.ResourceError, ValueError) as exc:
+        print(f"mavins nav: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    failed = 0
+    for _imu, out, rows, err in results:
+        if err is None:
+            print(f"mavins nav: wrote {rows} solution rows to {out}", file=sys.stderr)
+        else:
+            failed += 1
+            print(f"mavins nav: error: {err}", file=sys.stderr)
+    print(f"mavins nav: {len(results) - failed} of {len(results)} files navigated", file=sys.stderr)
+    return EXIT_USAGE if failed else 0
 
 
 def _cmd_nav_fdi(args: argparse.Namespace, opts: object) -> int:

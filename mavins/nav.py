@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+import os
 import sys
 import time
 from dataclasses import dataclass, field
@@ -176,3 +178,63 @@ def run_nav_aided(imu_path: Path, init_path: Path, out_path: Path, opts: NavOpti
     with files.atomic_output(out_path) as tmp:
         files.write_table(tmp, aided.OUT_COLUMNS, rows)
     return rows.shape[0], stats["counts"]
+
+
+def batch_outputs(imu_paths: list[Path], out_dir: Path) -> list[Path]:
+    """Where ``--each`` writes each file's solution: ``OUT_DIR/<its folder relative to the
+    inputs' common folder>/<name>.nav.csv`` (``.nav.parquet`` for a parquet input)."""
+    resolved = [p.resolve() for p in imu_paths]
+    common = Path(os.path.commonpath([p.parent for p in resolved]))
+    outs = []
+    for p in resolved:
+        base = p.name.split(".")[0]
+        ext = ".parquet" if p.suffix == ".parquet" else ".csv"
+        outs.append(out_dir / p.parent.relative_to(common) / f"{base}.nav{ext}")
+    if len(set(outs)) != len(outs):
+        raise files.DataFileError("--each: two IMU files would write the same solution (same folder and name)")
+    return outs
+
+
+def _batch_job(job: tuple[Path, Path, Path, NavOptions]) -> tuple[int, str | None]:
+    """One file of a batch: (rows written, None) or (0, the one-line error)."""
+    imu, init, out, opts = job
+    try:
+        return run_nav(imu, init, out, opts), None
+    except (files.DataFileError, files.ResourceError, ValueError, OSError) as exc:
+        return 0, str(exc)
+
+
+def _warm(opts: NavOptions) -> None:
+    """Load or compile the kernel ``run_nav`` will call, on two dummy samples."""
+    from .core import strapdown as sd
+    from .core.runner import initial_state
+
+    cfg = sd.make_config(**opts.strapdown.keywords())
+    run = sd.run_increments if opts.input == "increments" else sd.run_rates
+    state = initial_state({"t": 0.0, "lat": 45.0, "lon": 7.0, "h": 0.0, "vn": 0.0, "ve": 0.0, "vd": 0.0,
+                           "roll": 0.0, "pitch": 0.0, "yaw": 0.0})
+    t = np.array([0.01, 0.02])
+    run(state, cfg, t, np.zeros((2, 3)), np.zeros((2, 3)), np.empty((3, sd.OUT_SIZE)))
+
+
+def run_nav_batch(imu_paths: list[Path], init_path: Path | None, out_dir: Path, opts: NavOptions,
+                  jobs: int | None = None) -> list[tuple[Path, Path, int, str | None]]:
+    """``mavins nav --each``: every IMU file navigated on its own, on ``jobs`` processes.
+
+    Each file's initial state is ``init_path`` or, without it, the ``init.json``
+    beside the file (what ``mavins sim`` writes). A bad file does not stop the
+    others: its error comes back in its row of the result
+    ``(imu, solution, rows, error or None)``; each solution is written atomically.
+    """
+    from .parallel import run_jobs
+
+    outs = batch_outputs(imu_paths, out_dir)
+    inits = [init_path if init_path is not None else p.parent / "init.json" for p in imu_paths]
+    for imu, out in zip(imu_paths, outs):
+        files.check_outputs({"-o": out}, {"IMU": imu})
+    _warm(opts)  # compiled (or loaded) once here; the forked workers inherit it
+    jobs_list = [(imu, init, out, dataclasses.replace(opts, timing=False))
+                 for imu, init, out in zip(imu_paths, inits, outs)]
+    results = run_jobs(_batch_job, jobs_list, jobs=min(jobs or len(jobs_list), len(jobs_list)),
+                       label="mavins nav --each")
+    return [(imu, out, rows, err) for (imu, _, out, _), (rows, err) in zip(jobs_list, results)]
