@@ -486,6 +486,9 @@ def _nav_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--target-system", type=_positive_int(*SYSID), default=None, metavar="SYSID", help="accept IMU data only from this system")
     g.add_argument("--max-accel", type=_real(**POSITIVE), default=16 * 9.80665, metavar="M_S2", help="accelerometer range")
     g.add_argument("--max-gyro", type=_real(**POSITIVE), default=2000.0, metavar="DEG_S", help="gyro range")
+    g.add_argument("--geoid-height", type=_real(-200.0, 200.0), default=0.0, metavar="M",
+                   help="geoid undulation N: ellipsoidal height = AMSL altitude + N (GNSS input without an "
+                        "ellipsoidal height, GLOBAL_POSITION_INT output)")
     g.add_argument("--max-gap", type=_real(**POSITIVE), default=1.0, metavar="S",
                    help="a longer gap in sensor time is not integrated and marks the solution degraded")
     g.add_argument("--config", type=Path, metavar="FILE.toml", help="TOML file with any of these options (command line wins)")
@@ -573,7 +576,7 @@ def _engine_config(args: argparse.Namespace):  # type: ignore[no-untyped-def]
 
     return EngineConfig(lat=args.lat, lon=args.lon, alt=args.alt, heading=heading, declination=args.declination,
                         align=args.align, rate=args.rate, gyro_bias=args.gyro_bias, max_gap=args.max_gap,
-                        filter=flt, geoid_height=getattr(args, "geoid_height", 0.0),
+                        filter=flt, geoid_height=args.geoid_height,
                         **strapdown_from_options(args).keywords())
 
 
@@ -603,8 +606,6 @@ def _add_run(sub: argparse._SubParsersAction) -> None:
                    help="our system id (default: the vehicle's)")
     p.add_argument("--compid", type=_positive_int(1, 255), default=191, metavar="ID",
                    help="our component id (191 = onboard computer)")
-    p.add_argument("--geoid-height", type=_real(-200.0, 200.0), default=0.0, metavar="M",
-                   help="geoid undulation: GLOBAL_POSITION_INT alt = ellipsoidal height - this")
     p.add_argument("--tlog", type=Path, metavar="FILE", help="record every received message (replayable)")
     p.add_argument("-o", "--output", type=Path, metavar="NAV.csv", help="also write each output set as a solution row")
     p.add_argument("--request-imu", type=_real(0.0, 1e4, above=True), metavar="HZ", help="ask the autopilot for HIGHRES_IMU at HZ")

@@ -518,7 +518,7 @@ def df_gps(enc: mavlink.MAVLink, dec: mavlink.MAVLink, t_us: int, gps: dict[str,
     units of the format characters: Status (AP_GPS::GPS_Status, the numbering of MAVLink
     GPS_FIX_TYPE), Lat/Lng (1e-7 deg, format L), Alt (m AMSL, format e), Spd (m/s), GCrs (deg),
     HDop; GPA HAcc/VAcc (m, format C), SAcc (m/s), VDop. The GPS record has no ellipsoidal height:
-    the pipeline adds its geoid height (``EngineConfig.geoid_height``, 0 in replay) to the AMSL altitude."""
+    the pipeline adds its geoid height (``--geoid-height``, default 0) to the AMSL altitude."""
     acc = gpa or {}
     return gps_raw_int(enc, dec, t_us, int(gps["Status"]), gps["Lat"] * 1e-7, gps["Lng"] * 1e-7, gps["Alt"], None,
                        acc.get("HAcc", math.nan), acc.get("VAcc", math.nan), gps.get("Spd", math.nan),
