@@ -8,7 +8,8 @@
    run), through mavins/parallel.py (local cores or a Dask cluster); the
    sample standard deviation of the error against truth at every output time.
 3. Files (CONVENTIONS.md "Error analysis"): covariance.csv, montecarlo.csv,
-   budget.csv, plus analysis.png (when matplotlib is installed); written
+   budget.csv, plus analysis.rrd (Rerun, record/analysis.py) and analysis.png
+   (when matplotlib is installed); written
    together, temp-and-rename, only when everything succeeded.
 """
 
@@ -27,6 +28,7 @@ from .core import covariance as cov
 from .parallel import run_jobs
 
 OUTPUT_FILES = ("covariance.csv", "montecarlo.csv", "budget.csv")
+RECORDING_FILE = "analysis.rrd"
 PLOT_FILE = "analysis.png"
 COLUMNS = ("t",) + cov.SIGMA_COLUMNS
 BUDGET_HEADER = ("source",) + cov.BUDGET_COLUMNS
@@ -279,7 +281,7 @@ def run_analyze(scenario: object, spec: cov.AnalysisSpec, outdir: Path, opts: An
     """Analyse, write the files into ``outdir`` together (nothing on failure), print the table; returns the paths."""
     if outdir.exists() and not outdir.is_dir():
         raise files.DataFileError(f"{outdir}: -o names a file, expected a directory to write into")
-    names = OUTPUT_FILES + ((PLOT_FILE,) if _have_matplotlib() else ())
+    names = OUTPUT_FILES + (RECORDING_FILE,) + ((PLOT_FILE,) if _have_matplotlib() else ())
     targets = [outdir / name for name in names]
     files.check_outputs({f"-o {p}": p for p in targets}, {"SCENARIO": Path(scenario.source)})  # type: ignore[attr-defined]
     result = analyze(scenario, spec, opts)
@@ -291,7 +293,10 @@ def run_analyze(scenario: object, spec: cov.AnalysisSpec, outdir: Path, opts: An
             fh.write(",".join(BUDGET_HEADER) + "\n")
             fh.writelines(f"{name},{','.join(repr(float(v)) for v in result.budget[name])}\n"
                           for name in cov.SOURCES + ("total",))
-        if len(tmps) > 3:
-            _plot(Path(str(tmps[3])), result)
+        from .record.analysis import write_analysis
+
+        write_analysis(Path(str(tmps[3])), result.t, result.covariance, result.montecarlo)
+        if len(tmps) > 4:
+            _plot(Path(str(tmps[4])), result)
     print(_table(result))
     return targets

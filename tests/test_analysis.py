@@ -309,6 +309,18 @@ def test_cli_writes_the_contract_files(tmp_path: Path, capsys: pytest.CaptureFix
     assert [r.split(",")[0] for r in budget[1:]] == list(cov.SOURCES) + ["total"]
     png = (out / "analysis.png").read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n"
+    from rerun.chunk import RrdReader
+
+    table = np.loadtxt(out / "covariance.csv", delimiter=",", skiprows=1)
+    seen = {}
+    for ch in RrdReader(str(out / "analysis.rrd")).stream():
+        batch = ch.to_record_batch()
+        for name in batch.schema.names:
+            if name.endswith("Scalars:scalars"):
+                seen[ch.entity_path] = np.array(batch.column(name).to_pylist(), dtype=float)
+    assert np.array_equal(seen["/analysis/covariance/position"], table[:, 1:4])
+    assert set(seen) == {f"/analysis/{k}/{q}" for k in ("covariance", "montecarlo")
+                         for q in ("position", "velocity", "attitude")}
 
 
 @pytest.mark.parametrize(
