@@ -27,7 +27,7 @@ Analysis*, 1971, the same single-channel equations). From rest:
   which is ``-R eps (t - sin(w_s t)/w_s)`` (the single-channel Schuler
   response) while ``Omega t << 1``, and ``-g eps t^3 / 6`` at first
   (a nose-up attitude error tilts gravity into -north). After 4 h the Earth-rate
-  coupling (24 h term) makes it 17 % smaller than the single-channel form.
+  coupling (24 h term) makes it 16 % smaller than the single-channel form.
 
 Tolerances. The acceptance bands are the issue's (amplitude 2 %, period 1 %,
 gyro response 5 %). What theory leaves between the closed form and the two
