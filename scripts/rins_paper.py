@@ -38,7 +38,7 @@ if str(ROOT) not in sys.path:
 
 import numpy as np  # noqa: E402
 
-from mavins.core.rotation import quat_to_euler  # noqa: E402
+from mavins.core.rotation import quat_error_rows, quat_to_euler  # noqa: E402
 from mavins.core.runner import navigate  # noqa: E402
 from sim import rins  # noqa: E402
 from sim.motion import Motion  # noqa: E402
@@ -57,30 +57,6 @@ ARCSEC = math.degrees(1.0) * 3600.0  # rad -> arcsec
 # --- running the strapdown and measuring its error ----------------------------------
 
 
-def qmul(p: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """Hamilton product of quaternion rows."""
-    return np.stack([
-        p[..., 0] * q[..., 0] - p[..., 1] * q[..., 1] - p[..., 2] * q[..., 2] - p[..., 3] * q[..., 3],
-        p[..., 0] * q[..., 1] + p[..., 1] * q[..., 0] + p[..., 2] * q[..., 3] - p[..., 3] * q[..., 2],
-        p[..., 0] * q[..., 2] - p[..., 1] * q[..., 3] + p[..., 2] * q[..., 0] + p[..., 3] * q[..., 1],
-        p[..., 0] * q[..., 3] + p[..., 1] * q[..., 2] - p[..., 2] * q[..., 1] + p[..., 3] * q[..., 0],
-    ], axis=-1)
-
-
-def rotvec(q: np.ndarray) -> np.ndarray:
-    """Rotation vectors of quaternion rows (rad)."""
-    q = np.where(q[..., :1] < 0.0, -q, q)
-    v = np.linalg.norm(q[..., 1:], axis=-1)
-    safe = np.where(v > 0.0, v, 1.0)
-    k = np.where(v > 0.0, 2.0 * np.arctan2(v, q[..., 0]) / safe, 2.0)
-    return q[..., 1:] * k[..., None]
-
-
-def attitude_error(q_est: np.ndarray, q_true: np.ndarray) -> np.ndarray:
-    """Reference-frame attitude error ``phi = rotvec(q_est (x) q_true*)`` (rad), rows."""
-    return rotvec(qmul(q_est, q_true * np.array([1.0, -1.0, -1.0, -1.0])))
-
-
 def init_state(q0: np.ndarray, t0: float = 0.0) -> dict:
     e = np.degrees(quat_to_euler(np.ascontiguousarray(q0)))
     return dict(t=t0, lat=0.0, lon=0.0, h=0.0, vn=0.0, ve=0.0, vd=0.0, roll=e[0], pitch=e[1], yaw=e[2])
@@ -91,7 +67,7 @@ def run_strapdown(m: Motion, q0: np.ndarray, n: int, coning: bool) -> tuple[np.n
     sol = navigate(m.t, m.dtheta, m.dv, init_state(q0, m.t0), samples=n, earth_model="none", coning=coning)
     q_true = m.q[n - 1 :: n][: len(sol)]
     assert np.allclose(sol[:, 0], m.t[n - 1 :: n][: len(sol)], rtol=0, atol=1e-9)
-    return sol[:, 0], attitude_error(sol[:, 10:14], q_true)
+    return sol[:, 0], quat_error_rows(np.ascontiguousarray(sol[:, 10:14]), np.ascontiguousarray(q_true))
 
 
 def paper_run(n: int, wr: float | rins.Schedule, duration: float, coning: bool = True) -> tuple[np.ndarray, np.ndarray]:

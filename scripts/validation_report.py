@@ -35,6 +35,7 @@ import numba  # noqa: E402
 import numpy as np  # noqa: E402
 
 from mavins.core import earth  # noqa: E402
+from mavins.core.rotation import quat_angle_between, quat_angle_rows  # noqa: E402
 from mavins.core.runner import navigate  # noqa: E402
 from sim import motion  # noqa: E402
 
@@ -117,13 +118,6 @@ def table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
 def identity_init(t0: float = 0.0) -> dict[str, float]:
     """Initial state at the identity attitude, at rest at lat = lon = h = 0."""
     return dict(t=t0, lat=0.0, lon=0.0, h=0.0, vn=0.0, ve=0.0, vd=0.0, roll=0.0, pitch=0.0, yaw=0.0)
-
-
-def angle_errors(q_true: np.ndarray, q_est: np.ndarray) -> np.ndarray:
-    """Rotation angle (rad) of ``q_true^-1 (x) q_est``, row by row (atan2 form, exact near 0)."""
-    w = np.sum(q_true * q_est, axis=1)
-    v = q_true[:, :1] * q_est[:, 1:] - q_est[:, :1] * q_true[:, 1:] - np.cross(q_true[:, 1:], q_est[:, 1:])
-    return 2.0 * np.arctan2(np.linalg.norm(v, axis=1), np.abs(w))
 
 
 def drift_slope(t: np.ndarray, err: np.ndarray) -> float:
@@ -215,7 +209,7 @@ def section_table_11_1() -> str:
                 m.t, m.dtheta, m.dv, identity_init(), samples=1, attitude="dcm", order=str(order),
                 earth_model="none", orthonormalize_every=1,
             )
-            measured = drift_slope(sol[:, 0], angle_errors(m.q, sol[:, 10:14])) * DEG_H
+            measured = drift_slope(sol[:, 0], quat_angle_rows(m.q, sol[:, 10:14])) * DEG_H
             closed = abs(dcm_textbook_drift(order, sigma, dt)) * DEG_H
             inplane = abs(dcm_inplane_drift(order, sigma, dt)) * DEG_H
             worst = max(worst, abs(measured / inplane - 1.0))
@@ -257,7 +251,7 @@ def section_table_11_2() -> str:
                 m.t, m.dtheta, m.dv, identity_init(), samples=1, attitude="quaternion", order=str(order),
                 earth_model="none",
             )
-            measured = drift_slope(sol[:, 0], angle_errors(m.q, sol[:, 10:14])) * DEG_H
+            measured = drift_slope(sol[:, 0], quat_angle_rows(m.q, sol[:, 10:14])) * DEG_H
             closed = abs(quat_drift(order, sigma, dt)) * DEG_H
             cells += [TABLE_11_2[order][col], fmt(closed), fmt(measured), rel(measured, closed)]
         rows.append(cells)
@@ -302,7 +296,7 @@ def run_coning(n: int, period: float, updates: int, coning: bool = True, amp: fl
     init["roll"] = math.degrees(beta)  # q(0) = [cos(beta/2), sin(beta/2), 0, 0]
     sol = navigate(m.t, m.dtheta, m.dv, init, samples=n, earth_model="none", coning=coning)
     assert abs(sol[-1, 0] - m.t[-1]) < 1e-9
-    return float(angle_errors(m.q[-1:], sol[-1:, 10:14])[0] / (m.t[-1] - m.t0))
+    return float(quat_angle_between(m.q[-1], sol[-1, 10:14]) / (m.t[-1] - m.t0))
 
 
 def section_coning() -> str:
@@ -429,7 +423,7 @@ def section_stationary() -> str:
     de = np.radians(sol[:, 2] - lon) * (r_e + h) * math.cos(math.radians(lat))
     horiz = float(np.max(np.hypot(dn, de)))
     vert = float(np.max(np.abs(sol[:, 3] - h)))
-    att = float(np.max(angle_errors(np.tile(m.q[0], (len(sol), 1)), sol[:, 10:14])))
+    att = float(np.max(quat_angle_rows(np.tile(m.q[0], (len(sol), 1)), sol[:, 10:14])))
     vel = float(np.max(np.linalg.norm(sol[:, 4:7], axis=1)))
     steps = np.diff(np.concatenate(([0.0], sol[:, 0])))[:, None]
     integrated = np.cumsum(sol[:, 4:6] * steps, axis=0)

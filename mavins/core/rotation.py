@@ -456,3 +456,16 @@ def quat_angle_rows(p: np.ndarray, q: np.ndarray) -> np.ndarray:
     for i in range(p.shape[0]):
         out[i] = quat_angle_between(p[i], q[i])
     return out
+
+
+@kernel
+def quat_error_rows(q_est: np.ndarray, q_true: np.ndarray) -> np.ndarray:
+    """Attitude error (rad) of each row pair of two (n, 4) arrays: the rotation vector of ``q_est (x) q_true^-1``.
+
+    Estimate minus truth in the reference frame, ``C(est) = exp([phi x]) C(true)``;
+    its norm is :func:`quat_angle_rows`.
+    """
+    out = np.empty((q_est.shape[0], 3))
+    for i in range(q_est.shape[0]):
+        out[i] = quat_to_rotvec(quat_mul(q_est[i], quat_conj(q_true[i])))
+    return out
