@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 import time
 from collections.abc import Sequence
@@ -32,6 +33,9 @@ from dataclasses import replace
 from pathlib import Path
 from statistics import NormalDist
 from typing import Any
+
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):  # as mavins analyze does
+    os.environ.setdefault(_var, "1")
 
 import numpy as np
 
