@@ -16,7 +16,7 @@
   band printed, for N - 1, is the wider of the two); quantiles by Wilson and
   Hilferty (1931). The issue's goal is the ratio within 10 % at every minute.
 
-Run from the repository root (about 4 min on 2 cores; ``--quick``: 40 runs of 2 min at 100 Hz)::
+Run from the repository root (about 2 min on 2 cores; ``--quick``: 40 runs of 2 min at 100 Hz)::
 
     .venv/bin/python benchmarks/bench_analysis.py [--runs N] [--grade G] [--quick]
 """
