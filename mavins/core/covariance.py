@@ -24,9 +24,9 @@ analysis only, so the live filter does not carry them):
 error, the off-diagonal terms the misalignment / non-orthogonality (sim/errors.py
 ``(I + S)(I + M)`` to first order). K enters exactly as a bias ``b = K u``
 does (u = w_ib^b or f^b), so its columns in F are those of the bias times the
-measured quantity (Titterton & Weston, *Strapdown Inertial Navigation
-Technology*, 2nd ed., 2004, section 12.2, sensor error model
-``dw = B + S w + M w``):
+measured quantity (the sensor error model ``dw = B + S w + M w`` of Titterton
+& Weston, *Strapdown Inertial Navigation Technology*, 2nd ed., 2004, ch. 12,
+generalised system performance analysis; section number not checked):
 
     d(phi)/dt  += -C_b^n[:, i] w_j   for K_g[i, j]
     d(dv)/dt   += -C_b^n[:, i] f_j   for K_a[i, j]
