@@ -309,6 +309,11 @@ CASES: list[tuple[str, list[str], list[str]]] = [
     ("review-missing", ["review", "none.rrd", "--screenshot", "x.png"], ["no such recording"]),
     ("review-screenshot-is-the-input", ["review", "valid.rrd", "--screenshot", "valid.rrd"], ["also the input"]),
     ("review-screenshot-is-a-directory", ["review", "valid.rrd", "--screenshot", "sub"], ["directory"]),
+    # analyze
+    ("analyze-unknown-scenario", ["analyze", "nosuch", "--runs", "2", "-o", "an"], ["no such scenario"]),
+    ("analyze-output-is-a-file", ["analyze", "static", "--runs", "2", "-o", "good.tlog"], ["names a file"]),
+    ("analyze-imu-spec-missing", ["analyze", "static", "--runs", "2", "-o", "an", "--imu-spec", "none.toml"],
+     ["--imu-spec", "none.toml"]),
     # key
     ("key-exists", ["key", "key.hex"], ["exists", "--force"]),
     ("key-is-a-directory", ["key", "sub", "--force"], ["directory"]),
@@ -335,7 +340,7 @@ def test_bad_input_is_one_line_exit_2_and_nothing_written(world: Path, case) -> 
 
 REQUIRED = {"nav": ["imu.csv", "--init", "init.json", "-o", "out.csv"], "sim": ["static", "-o", "simout"],
             "run": [], "replay": ["good.tlog", "-o", "out.csv"], "demo": [], "review": ["valid.rrd", "--screenshot", "x.png"],
-            "key": ["new.key"]}
+            "key": ["new.key"], "analyze": ["static", "--runs", "2", "-o", "an"]}
 
 
 def _numeric_options() -> list[tuple[str, str, object]]:
