@@ -1,14 +1,19 @@
-"""What several test modules share: the mavins command, its environment, ports and log waits."""
+"""What several test modules share: the mavins command, its environment, ports and log waits, the typed
+WGS-84 truth, and the one angle wrap and attitude-error metric of the tests."""
 
 from __future__ import annotations
 
-import signal
-
+import math
 import os
+import select
+import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -47,6 +52,24 @@ def mavins(*args: str, cwd: Path, env: dict[str, str] | None = None,
                           timeout=timeout)
 
 
+@contextmanager
+def running_service(log_path: Path, *args: str, cwd: Path, env: dict[str, str] | None = None,
+                    stop_timeout: float = 120.0) -> Iterator[subprocess.Popen]:
+    """``mavins run ARGS`` logging to log_path, listening when the block starts; stopped with SIGTERM when
+    it ends (killed if it does not stop in time or the block raised). The exit code is for the caller."""
+    with open(log_path, "w") as log:
+        proc = subprocess.Popen([*MAVINS, "run", *args], stdout=log, stderr=subprocess.STDOUT, env=env or ENV, cwd=cwd)
+    try:
+        wait_for_line(log_path, "ready: listening on", proc)
+        yield proc
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(stop_timeout)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(10)
+
+
 def summary(log: str) -> dict[str, str]:
     """The ``mavins run: key: value`` lines of a service's exit summary."""
     out: dict[str, str] = {}
@@ -55,6 +78,82 @@ def summary(log: str) -> dict[str, str]:
             k, v = line[len("mavins run: "):].split(": ", 1)
             out[k] = v
     return out
+
+
+# -- typed WGS-84 (NIMA TR8350.2, docs/conventions.md) and C_b^n: the tests' truth, never imported from mavins --
+A = 6378137.0
+F = 1 / 298.257223563
+E2 = F * (2 - F)
+OMEGA = 7.292115e-5
+GAMMA_E = 9.7803253359
+K_SOM = 0.00193185265241
+M_RATIO = 0.00344978650684
+
+
+def gamma(lat, h):  # type: ignore[no-untyped-def]
+    """Normal gravity (m/s^2) at latitude lat (rad) and height h (m): Somigliana with the second-order height term."""
+    s2 = np.sin(lat) ** 2
+    g0 = GAMMA_E * (1 + K_SOM * s2) / np.sqrt(1 - E2 * s2)
+    return g0 * (1 - 2 / A * (1 + F + M_RATIO - 2 * F * s2) * h + 3 * h * h / (A * A))
+
+
+def cbn(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    """C_b^n = Rz(yaw) Ry(pitch) Rx(roll) (conventions.md "Euler angles")."""
+    cr, sr, cp, sp, cy, sy = (math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch), math.cos(yaw),
+                              math.sin(yaw))
+    rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1.0]])
+    ry = np.array([[cp, 0, sp], [0, 1.0, 0], [-sp, 0, cp]])
+    rx = np.array([[1.0, 0, 0], [0, cr, -sr], [0, sr, cr]])
+    return rz @ ry @ rx
+
+
+# -- angles: the tests' own forms, written apart from mavins.core.rotation (test_rotation checks they agree) --
+
+
+def _wrap(a, half: float):  # type: ignore[no-untyped-def]
+    w = half - (half - np.asarray(a, float)) % (2.0 * half)
+    return np.where(w <= -half, w + 2.0 * half, w)[()]  # the modulo of a tiny negative rounds up to a whole turn
+
+
+def wrap_rad(a):  # type: ignore[no-untyped-def]
+    """Angle(s) (rad) wrapped into (-pi, pi]."""
+    return _wrap(a, np.pi)
+
+
+def wrap_deg(a):  # type: ignore[no-untyped-def]
+    """Angle(s) (deg) wrapped into (-180, 180]."""
+    return _wrap(a, 180.0)
+
+
+def _quat_over(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Scalar and vector parts of ``a (x) b^-1`` (Hamilton, [w, x, y, z], rows; any norm)."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    w = np.sum(a * b, axis=-1)
+    v = b[..., :1] * a[..., 1:] - a[..., :1] * b[..., 1:] - np.cross(a[..., 1:], b[..., 1:])
+    return w, v
+
+
+def quat_error(q_est: np.ndarray, q_true: np.ndarray) -> np.ndarray:
+    """Attitude error phi (rad), rows: the rotation vector of ``q_est (x) q_true^-1``.
+
+    Estimate minus truth in the reference frame, ``C(est) = exp([phi x]) C(true)``.
+    """
+    w, v = _quat_over(q_est, q_true)
+    v = np.where((w < 0.0)[..., None], -v, v)
+    s = np.linalg.norm(v, axis=-1)
+    k = 2.0 * np.arctan2(s, np.abs(w)) / np.where(s > 0.0, s, 1.0)  # s = 0: phi = v = 0
+    return v * k[..., None]
+
+
+def quat_angle(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """The attitude error as an angle (rad, in [0, pi]) between attitudes p and q, rows (atan2 form, exact near 0)."""
+    w, v = _quat_over(q, p)
+    return 2.0 * np.arctan2(np.linalg.norm(v, axis=-1), np.abs(w))
+
+
+def quat_angle_deg(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """:func:`quat_angle` in degrees."""
+    return np.degrees(quat_angle(p, q))
 
 
 # -- events, not durations ------------------------------------------------------------------------
@@ -170,6 +269,39 @@ def tlog_frames(path: Path) -> int:
         n += 1
     assert i == len(data), "the tlog ends inside a frame"
     return n
+
+
+class StampedReceiver:
+    """A pymavlink parser (MAVLink 2, ardupilotmega) on a fresh 127.0.0.1 UDP port, e.g. the service's --out,
+    read by a thread; every message goes to ``take(kernel receive stamp, message)``."""
+
+    def __init__(self) -> None:
+        from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+        self.sock = roomy(socket.socket(socket.AF_INET, socket.SOCK_DGRAM))
+        self.sock.bind(("127.0.0.1", 0))
+        self.port = self.sock.getsockname()[1]
+        self._parser = mavlink.MAVLink(None)
+        self._parser.robust_parsing = True
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def take(self, arrival: float, m) -> None:  # type: ignore[no-untyped-def]
+        raise NotImplementedError
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            if not select.select([self.sock], [], [], 0.05)[0]:
+                continue
+            for arrival, data in recv_stamped(self.sock):
+                for m in self._parser.parse_buffer(data) or []:
+                    self.take(arrival, m)
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(2.0)
+        self.sock.close()
 
 
 FEED_ROOM = 4096  # bytes the kernel may hold unread for the service (about 4 small datagrams, by its accounting)

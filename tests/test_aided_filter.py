@@ -56,6 +56,7 @@ from mavins.core.rotation import dcm_to_euler, euler_to_dcm, quat_to_dcm, rotvec
 from sim import aiding, errors
 from sim.generate import generate
 from sim.scenarios import Scenario, load
+from support import quat_error, wrap_rad
 
 N_RUNS = 20
 DURATION = 120.0
@@ -111,28 +112,13 @@ def trajectory():
     return generate(Scenario("flight_quiet", sc.source, doc), duration=DURATION, rate=RATE, seed=0, grade="ideal")
 
 
-def quat_mul(p: np.ndarray, q: np.ndarray) -> np.ndarray:
-    w1, x1, y1, z1 = np.moveaxis(p, -1, 0)
-    w2, x2, y2, z2 = np.moveaxis(q, -1, 0)
-    return np.stack([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2], axis=-1)
-
-
-def rotvec(q: np.ndarray) -> np.ndarray:
-    q = np.where(q[..., :1] < 0.0, -q, q)
-    v = np.linalg.norm(q[..., 1:], axis=-1)
-    k = np.where(v > 1e-12, 2.0 * np.arctan2(v, q[..., 0]) / np.maximum(v, 1e-300), 2.0 / q[..., 0])
-    return q[..., 1:] * k[..., None]
-
-
 def nav_errors(rows: np.ndarray, truth: np.ndarray) -> np.ndarray:
     """(phi, dv, dp) of kernel rows against truth rows (file units): estimate minus truth.
 
     ``C(est) = exp([phi x]) C(true)``, i.e. ``q(est) = r(phi) (x) q(true)``;
     position in NED metres through the radii of the true position.
     """
-    qt = truth[:, 10:14] * np.array([1.0, -1.0, -1.0, -1.0])
-    phi = rotvec(quat_mul(rows[:, 10:14], qt))
+    phi = quat_error(rows[:, 10:14], truth[:, 10:14])
     lat = np.radians(truth[:, 1])
     h = truth[:, 3]
     s2 = np.sin(lat) ** 2
@@ -407,7 +393,7 @@ def test_magnetometer_data_gives_the_true_heading(static_run) -> None:
     yaws = np.array([aiding.mag_heading(r, math.radians(truth[7]), math.radians(truth[8]),
                                         math.radians(cfg.declination)) for r in m])
     sig = cfg.sigma / (cfg.strength * math.cos(math.radians(cfg.inclination)))
-    dy = (yaws - math.radians(truth[9]) + np.pi) % (2 * np.pi) - np.pi
+    dy = wrap_rad(yaws - math.radians(truth[9]))
     assert abs(dy.mean()) < 4.0 * sig / math.sqrt(dy.size)
     assert dy.std() == pytest.approx(sig, rel=4.0 / math.sqrt(2 * dy.size))
 
@@ -596,7 +582,7 @@ def measurement_jacobian_check(measure, dx: np.ndarray, tol: float) -> None:
     ref = moving_state()
     nu0, H, _ = measure(ref)
     nu1, _, _ = measure(inject(ref, CFG, dx))
-    d = (nu1 - nu0 + np.pi) % (2 * np.pi) - np.pi if nu0.size == 1 else nu1 - nu0
+    d = wrap_rad(nu1 - nu0) if nu0.size == 1 else nu1 - nu0
     np.testing.assert_allclose(d, H[:, :9] @ dx[:9], atol=tol)
 
 

@@ -24,7 +24,6 @@ the test does not depend on the machine's speed.
 from __future__ import annotations
 
 import math
-import signal
 import socket
 import subprocess
 import threading
@@ -35,7 +34,7 @@ from typing import Callable
 import numpy as np
 import pytest
 
-from support import ENV, MAVINS, free_udp_port, wait_for_line
+from support import ENV, MAVINS, free_udp_port, running_service, wait_for_line, wrap_deg
 from mavins.link.mavlink import mavlink
 from mavins.link.publish import PublishConfig
 
@@ -77,29 +76,21 @@ def _run(tmp: Path, *extra: str) -> tuple[Received, str]:
     th = threading.Thread(target=_listen, args=(client, got, stop), daemon=True)
     th.start()
     log_path = tmp / "svc.log"
-    with open(log_path, "w") as log:
-        svc = subprocess.Popen([*MAVINS, "run", "--master", f"udpin:127.0.0.1:{port}", "--out",
-                                f"udpout:127.0.0.1:{client.getsockname()[1]}", "--lat", START[0], "--lon", START[1],
-                                "--alt", START[2], "--heading", "vehicle", "--align", "5", "--rate", "10",
-                                "--grade", "tactical", *extra],
-                               stdout=log, stderr=subprocess.STDOUT, env=ENV, cwd=tmp)
     try:
-        wait_for_line(log_path, "ready: listening on", svc)
-        sim = subprocess.Popen([*MAVINS, "sim", "static", "--rate", "200", "--grade", "tactical", "--duration",
-                                str(DURATION_S), "--speed", "5", "--stream", f"udpout:127.0.0.1:{port}"],
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=ENV, cwd=tmp, text=True)
-        wait_for_line(log_path, "NAVIGATING", svc)
-        req = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as gcs:
-            gcs.sendto(req.timesync_encode(0, 123456789).pack(req), ("127.0.0.1", port))
-        _, err = sim.communicate(timeout=600)
-        assert sim.returncode == 0, err
-        svc.send_signal(signal.SIGTERM)
-        svc.wait(120)
+        with running_service(log_path, "--master", f"udpin:127.0.0.1:{port}", "--out",
+                             f"udpout:127.0.0.1:{client.getsockname()[1]}", "--lat", START[0], "--lon", START[1],
+                             "--alt", START[2], "--heading", "vehicle", "--align", "5", "--rate", "10",
+                             "--grade", "tactical", *extra, cwd=tmp) as svc:
+            sim = subprocess.Popen([*MAVINS, "sim", "static", "--rate", "200", "--grade", "tactical", "--duration",
+                                    str(DURATION_S), "--speed", "5", "--stream", f"udpout:127.0.0.1:{port}"],
+                                   stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=ENV, cwd=tmp, text=True)
+            wait_for_line(log_path, "NAVIGATING", svc)
+            req = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as gcs:
+                gcs.sendto(req.timesync_encode(0, 123456789).pack(req), ("127.0.0.1", port))
+            _, err = sim.communicate(timeout=600)
+            assert sim.returncode == 0, err
     finally:
-        if svc.poll() is None:
-            svc.kill()
-            svc.wait(10)
         stop.set()
         th.join(5)
         client.close()
@@ -178,7 +169,7 @@ def test_gps_input_carries_the_solution(aided: tuple[Received, str]) -> None:
     for m in last:
         assert m.fix_type == 3 and m.gps_id == 0
         assert 0.0 < m.horiz_accuracy <= 5.0 and 0.0 < m.vert_accuracy <= 5.0
-        assert abs((m.yaw / 100.0 - HEADING_DEG + 180.0) % 360.0 - 180.0) < 1.0  # cdeg, the true heading
+        assert abs(wrap_deg(m.yaw / 100.0 - HEADING_DEG)) < 1.0  # cdeg, the true heading
         assert abs(m.lat * 1e-7 - float(START[0])) < 1e-4 and abs(m.lon * 1e-7 - float(START[1])) < 1e-4
 
 

@@ -11,7 +11,6 @@ its replay must equal the live solution byte for byte.
 
 from __future__ import annotations
 
-import signal
 import socket
 import subprocess
 import time
@@ -19,7 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from support import ENV, MAVINS, free_udp_port, mavins, summary, tlog_frames, wait_for_line, wait_for_room, wait_until_read
+from support import (
+    ENV, MAVINS, free_udp_port, mavins, running_service, summary, tlog_frames, wait_for_room, wait_until_read,
+)
 from mavins.link.mavlink import mavlink
 
 RATE_HZ = 300.0  # messages per second, paced in real time (issue: 300-1000 for 60 s)
@@ -49,12 +50,8 @@ def test_cold_start_then_paced_input_loses_nothing(tmp_path: Path) -> None:
     port = free_udp_port()
     tlog, live, rrd, log_path = tmp_path / "in.tlog", tmp_path / "live.csv", tmp_path / "live.rrd", tmp_path / "svc.log"
     frames = _frames(int(RATE_HZ * SECONDS))
-    with open(log_path, "w") as log:
-        svc = subprocess.Popen([*MAVINS, "run", "--master", f"udpin:127.0.0.1:{port}", "--tlog", str(tlog),
-                                "-o", str(live), "--rerun", str(rrd), *NAV], stdout=log, stderr=subprocess.STDOUT,
-                               env=env, cwd=tmp_path)
-    try:
-        wait_for_line(log_path, "ready: listening on", svc)
+    with running_service(log_path, "--master", f"udpin:127.0.0.1:{port}", "--tlog", str(tlog), "-o", str(live),
+                         "--rerun", str(rrd), *NAV, cwd=tmp_path, env=env) as svc:
         head = log_path.read_text()
         assert "compiling the navigation kernels" in head, head
         assert head.index("compiling the navigation kernels") < head.index("ready: listening on")
@@ -68,12 +65,6 @@ def test_cold_start_then_paced_input_loses_nothing(tmp_path: Path) -> None:
                     wait_for_room(port)  # a busy machine slows the sender; the service's socket never overflows
                 sock.sendto(f, ("127.0.0.1", port))
         wait_until_read(port, svc)  # everything read before the stop (the stop's drain is bounded in time)
-        svc.send_signal(signal.SIGTERM)
-        svc.wait(120)
-    finally:
-        if svc.poll() is None:
-            svc.kill()
-            svc.wait(10)
     text = log_path.read_text()
     assert svc.returncode == 0, text
     s = summary(text)

@@ -24,23 +24,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from support import ENV, MAVINS, mavins
-
-# typed, NIMA TR8350.2 / docs/conventions.md (not imported from mavins)
-A = 6378137.0
-F = 1 / 298.257223563
-E2 = F * (2 - F)
-OMEGA = 7.292115e-5
-GAMMA_E = 9.7803253359
-K_SOM = 0.00193185265241
-M_RATIO = 0.00344978650684
-
-
-def gamma(lat: float, h: np.ndarray | float) -> np.ndarray | float:
-    s2 = math.sin(lat) ** 2
-    g0 = GAMMA_E * (1 + K_SOM * s2) / math.sqrt(1 - E2 * s2)
-    return g0 * (1 - 2 / A * (1 + F + M_RATIO - 2 * F * s2) * h + 3 * h * h / (A * A))
-
+from support import ENV, GAMMA_E, MAVINS, OMEGA, gamma, mavins
 
 def write_increments(path: Path, t: np.ndarray, dth: np.ndarray, dv: np.ndarray) -> None:
     rows = np.column_stack([t, dth, dv])

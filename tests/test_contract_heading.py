@@ -38,35 +38,11 @@ import numpy as np
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
 
-from support import ServiceProcess  # noqa: E402
+from support import OMEGA, ServiceProcess, cbn, gamma, wrap_deg  # noqa: E402
 
-# typed: NIMA TR8350.2 / docs/conventions.md
-A = 6378137.0
-F = 1 / 298.257223563
-E2 = F * (2 - F)
-OMEGA = 7.292115e-5
-GAMMA_E = 9.7803253359
-K_SOM = 0.00193185265241
-M_RATIO = 0.00344978650684
 ANGLE_TOL_DEG = 1e-4
 ALL_FIELDS = 0b111111111  # acc, gyro, mag
 ACC_GYRO = 0b111111
-
-
-def gamma(lat: float, h: float) -> float:
-    s2 = math.sin(lat) ** 2
-    return GAMMA_E * (1 + K_SOM * s2) / math.sqrt(1 - E2 * s2) * (1 - 2 / A * (1 + F + M_RATIO - 2 * F * s2) * h
-                                                                 + 3 * h * h / (A * A))
-
-
-def cbn(roll: float, pitch: float, yaw: float) -> np.ndarray:
-    """C_b^n = Rz(yaw) Ry(pitch) Rx(roll) (conventions.md "Euler angles")."""
-    cr, sr, cp, sp, cy, sy = (math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch), math.cos(yaw),
-                              math.sin(yaw))
-    rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1.0]])
-    ry = np.array([[cp, 0, sp], [0, 1.0, 0], [-sp, 0, cp]])
-    rx = np.array([[1.0, 0, 0], [0, cr, -sr], [0, sr, cr]])
-    return rz @ ry @ rx
 
 
 @dataclass(frozen=True)
@@ -119,12 +95,8 @@ def send_rest(mav: mavlink.MAVLink, board: Board, t0_us: int, seconds: float, ra
     return n + 1
 
 
-def wrap(a: np.ndarray | float) -> np.ndarray | float:
-    return (np.asarray(a) + 180.0) % 360.0 - 180.0
-
-
 def assert_attitude(rows: np.ndarray, roll: float, pitch: float, yaw: float, tol: float = ANGLE_TOL_DEG) -> None:
-    err = np.abs(wrap(rows[:, 7:10] - np.array([roll, pitch, yaw])))
+    err = np.abs(wrap_deg(rows[:, 7:10] - np.array([roll, pitch, yaw])))
     assert np.all(err <= tol), f"max |roll, pitch, yaw error| = {err.max(0)} deg (first row {rows[0, 7:10]})"
 
 
@@ -146,7 +118,7 @@ def test_mag_heading_with_declination(tmp_path: Path) -> None:
     b = MAG_BOARD
     # what skipping the levelling would give (typed field, typed heading formula of the contract)
     m = b.mag()
-    assert abs(wrap(math.degrees(math.atan2(-m[1], m[0])) + b.declination - b.yaw)) > 15.0
+    assert abs(wrap_deg(math.degrees(math.atan2(-m[1], m[0])) + b.declination - b.yaw)) > 15.0
     svc = Service(tmp_path, "--lat", str(b.lat), "--lon", "8.5", "--alt", str(b.h), "--heading", "mag",
                   "--declination", str(b.declination), "--align", "2")
     send_rest(svc.mav(), b, 1_000_000, 22.0)
@@ -156,7 +128,7 @@ def test_mag_heading_with_declination(tmp_path: Path) -> None:
     assert "heading 80.00 deg" in lines[0], lines[0]
     assert res.nav[-1, 0] - res.nav[0, 0] > 19.0
     yaw = res.nav[:, 9]
-    assert np.all(np.abs(wrap(yaw - b.yaw)) <= ANGLE_TOL_DEG), (
+    assert np.all(np.abs(wrap_deg(yaw - b.yaw)) <= ANGLE_TOL_DEG), (
         f"aligned at 80.00 deg (magnetic 70 + declination 10), the solution's yaw then goes "
         f"{yaw[0]:.4f} -> {yaw[-1]:.4f} deg at rest: towards the magnetic heading 70 deg, i.e. something "
         f"after the alignment uses the magnetometer without --declination")
@@ -208,7 +180,7 @@ def test_raw_imu_magnetometer_in_milligauss(tmp_path: Path) -> None:
     roll, pitch = math.atan2(-fy, -fz), math.atan2(fx, math.hypot(fy, fz))
     lev = cbn(roll, pitch, 0.0) @ (mag * 1e-3)
     expected = math.degrees(math.atan2(-lev[1], lev[0])) + b.declination
-    assert abs(wrap(expected - b.yaw)) < 0.3
+    assert abs(wrap_deg(expected - b.yaw)) < 0.3
     svc = Service(tmp_path, "--lat", str(b.lat), "--lon", "151.2", "--alt", str(b.h), "--heading", "mag",
                   "--declination", str(b.declination), "--align", "1")
     mav = svc.mav()
@@ -218,7 +190,7 @@ def test_raw_imu_magnetometer_in_milligauss(tmp_path: Path) -> None:
     lines = navigating_lines(res.log)
     assert len(lines) == 1 and lines[0].endswith("from magnetometer"), res.log
     assert f"heading {expected:.2f} deg" in lines[0], (lines[0], expected)
-    assert abs(wrap(res.nav[0, 9] - expected)) <= 1e-6, (
+    assert abs(wrap_deg(res.nav[0, 9] - expected)) <= 1e-6, (
         f"first solution yaw {res.nav[0, 9]:.5f} deg, aligned at {expected:.5f} (magnetic "
         f"{expected - b.declination:.5f} + declination {b.declination}): moved towards the magnetic heading")
     assert abs(res.nav[0, 7] - math.degrees(roll)) <= 1e-6 and abs(res.nav[0, 8] - math.degrees(pitch)) <= 1e-6

@@ -34,9 +34,7 @@ from __future__ import annotations
 import math
 import os
 import select
-import signal
 import socket
-import subprocess
 import threading
 from dataclasses import dataclass
 from pathlib import Path
@@ -48,25 +46,10 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
 
 from support import (  # noqa: E402
-    ENV, Feed, EVENT_TIMEOUT_S, MAVINS, free_udp_port, roomy, summary, wait_for_line, wait_until_read,
+    A, E2, GAMMA_E, OMEGA, RunResult, ServiceProcess, cbn, gamma, roomy, wait_until_read,
 )
 
-# --- typed WGS-84 (NIMA TR8350.2, docs/conventions.md) -------------------------------------
-A = 6378137.0
-F = 1 / 298.257223563
-E2 = F * (2 - F)
-OMEGA = 7.292115e-5
-GAMMA_E = 9.7803253359
-K_SOM = 0.00193185265241
-M_RATIO = 0.00344978650684
-
-
-def gamma(lat, h):  # type: ignore[no-untyped-def]
-    s2 = np.sin(lat) ** 2
-    return GAMMA_E * (1 + K_SOM * s2) / np.sqrt(1 - E2 * s2) * (1 - 2 / A * (1 + F + M_RATIO - 2 * F * s2) * h
-                                                                  + 3 * h * h / (A * A))
-
-
+# --- typed WGS-84 beyond support's (NIMA TR8350.2, docs/conventions.md) -----------------------
 def r_n(lat):  # type: ignore[no-untyped-def]
     return A * (1 - E2) / (1 - E2 * np.sin(lat) ** 2) ** 1.5
 
@@ -104,16 +87,7 @@ def lat_of_arc(s: np.ndarray) -> np.ndarray:
     return lat
 
 
-# --- typed rotations: C_b^n = Rz(yaw) Ry(pitch) Rx(roll) (conventions.md) ---------------------------
-def cbn(roll: float, pitch: float, yaw: float) -> np.ndarray:
-    cr, sr, cp, sp, cy, sy = (math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch), math.cos(yaw),
-                              math.sin(yaw))
-    rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1.0]])
-    ry = np.array([[cp, 0, sp], [0, 1.0, 0], [-sp, 0, cp]])
-    rx = np.array([[1.0, 0, 0], [0, cr, -sr], [0, sr, cr]])
-    return rz @ ry @ rx
-
-
+# --- typed rotations: C_b^n = Rz(yaw) Ry(pitch) Rx(roll) (conventions.md, support.cbn) ------------
 def quat_of(roll: float, pitch: float, yaw: float) -> np.ndarray:
     cr, sr, cp, sp, cy, sy = (math.cos(roll / 2), math.sin(roll / 2), math.cos(pitch / 2), math.sin(pitch / 2),
                               math.cos(yaw / 2), math.sin(yaw / 2))
@@ -157,46 +131,21 @@ class Listener:
 
 
 @dataclass
-class Result:
-    log: str
-    counters: dict[str, str]
-    nav: np.ndarray
+class Result(RunResult):
     msgs: dict[str, list]
 
 
-class Service:
-    """``mavins run OPTIONS`` listening on a free port of 127.0.0.1, with ``-o nav.csv`` and an ``--out``."""
+class Service(ServiceProcess):
+    """support.ServiceProcess with an ``--out`` to a :class:`Listener`."""
 
     def __init__(self, tmp: Path, *options: str) -> None:
-        self.port = free_udp_port()
-        self.log_path, self.nav_path = tmp / "service.log", tmp / "nav.csv"
         self.listener = Listener()
-        cmd = [*MAVINS, "run", "--master", f"udpin:127.0.0.1:{self.port}", "-o", str(self.nav_path),
-               "--out", f"udpout:127.0.0.1:{self.listener.port}", *options]
-        with open(self.log_path, "w") as log:
-            self.proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=ENV, cwd=tmp)
-        wait_for_line(self.log_path, "ready: listening on", self.proc)
-        self.feed = Feed(self.port)
-
-    def mav(self, sysid: int = 1, compid: int = 1) -> mavlink.MAVLink:
-        return mavlink.MAVLink(self.feed, srcSystem=sysid, srcComponent=compid)
+        super().__init__(tmp, "--out", f"udpout:127.0.0.1:{self.listener.port}", *options)
 
     def stop(self) -> Result:
-        """Wait until the service has read every datagram, stop it (SIGINT) and collect."""
-        try:
-            wait_until_read(self.port, self.proc)
-            self.proc.send_signal(signal.SIGINT)
-            self.proc.wait(EVENT_TIMEOUT_S)
-        finally:
-            if self.proc.poll() is None:
-                self.proc.kill()
-                self.proc.wait(10)
-            self.feed.sock.close()
-        msgs = self.listener.close()
-        log = self.log_path.read_text(errors="replace")
-        assert self.proc.returncode == 0 and "Traceback" not in log, log
-        nav = np.loadtxt(self.nav_path, delimiter=",", skiprows=1, ndmin=2)
-        return Result(log, summary(log), nav, msgs)
+        """Stop the service as support.ServiceProcess does, then collect what the listener heard."""
+        run = super().stop()
+        return Result(run.log, run.counters, run.nav, self.listener.close())
 
 
 def f32_error(x: np.ndarray) -> np.ndarray:

@@ -40,7 +40,7 @@ import pytest
 
 os.environ.setdefault("MAVLINK20", "1")
 
-from support import RunResult as Result, ServiceProcess  # noqa: E402
+from support import RunResult as Result, ServiceProcess, wrap_deg  # noqa: E402
 
 G_N = 9.80665  # standard gravity (m/s^2): 1 mG = G_N / 1000
 MG = G_N / 1000.0
@@ -60,10 +60,6 @@ YAW_TURN = GYRO_COUNTS * MRAD * (GYRO_US[1] - GYRO_US[0]) * 1e-6  # 5 rad
 _T_A = (ACC_US[1] - ACC_US[0]) * 1e-6
 V_TOL = 2 * GAMMA_E * (ACC_COUNTS * MG) * _T_A**3 / (6 * A) + 1e-4  # twice the transport-tilt leak, + 0.1 mm/s
 YAW_TOL_DEG = 1e-3  # 4e-6 rad second-order tilt (2.3e-4 deg), rounded up
-
-
-def wrap_deg(a: float) -> float:
-    return (a + 180.0) % 360.0 - 180.0
 
 
 Service = ServiceProcess  # support.py: `mavins run` fed over UDP
@@ -191,7 +187,7 @@ def test_sampled_rates_ramp_integrates_exactly(tmp_path: Path) -> None:
     tau = np.clip(tn - t_r, 0.0, None)
     expected = np.degrees(psi0 + k_ramp * tau * tau / 2)
     tol = math.degrees(rounding + 1e-7)
-    err = np.abs((nav[:, 9] - expected + 180.0) % 360.0 - 180.0)
+    err = np.abs(wrap_deg(nav[:, 9] - expected))
     print(f"\nramp: final yaw {nav[-1, 9]:.6f} deg, closed form {expected[-1]:.6f} deg, max error {err.max():.2e} "
           f"deg (tol {tol:.1e}; averaged reading would be off by {math.degrees(k_ramp * 5 * 0.01 / 2):.3f} deg)")
     assert np.all(err <= tol)

@@ -66,6 +66,7 @@ from mavins.link.signing import now_timestamp  # noqa: E402
 from sim.generate import generate  # noqa: E402
 from sim.scenarios import Scenario  # noqa: E402
 from sim.stream import StreamOptions, frames  # noqa: E402
+from support import wrap_deg  # noqa: E402
 
 FAST_EXAMPLES = 300
 EXAMPLES = int(os.environ.get("MAVINS_FUZZ_EXAMPLES") or 0) or FAST_EXAMPLES
@@ -485,10 +486,6 @@ def _unknown(msg: object) -> bool:
     return isinstance(msg, mavlink.MAVLink_unknown)
 
 
-def _wrap_deg(a: np.ndarray) -> np.ndarray:
-    return (a + 180.0) % 360.0 - 180.0
-
-
 def _feed_expect_clean_output(rig: "Rig", stream: list) -> list | None:
     """Feed the stream; the state stays finite and the output rows equal the clean stream's bit for bit.
 
@@ -587,7 +584,7 @@ def test_hostile_values_keep_state_finite_and_recover(rig: Rig, data: st.DataObj
     assert len(new_rows) >= 10
     for r in new_rows[-5:]:
         assert r[0] * 1e6 >= t_new - 1
-        err = _wrap_deg(np.degrees(r[7:10]) - rig.valid.truth_deg)
+        err = wrap_deg(np.degrees(r[7:10]) - rig.valid.truth_deg)
         assert np.all(np.abs(err) < 0.01), err
 
 
@@ -723,5 +720,5 @@ def test_long_stream_of_extreme_but_in_range_samples(rig: Rig) -> None:
     rig.feed(_recovery(rig.valid, int(last * 1e6) + 100_000_000))
     rig.assert_finite()
     assert rig.svc.pipeline.engine.state is State.NAVIGATING
-    err = _wrap_deg(np.degrees(rig.rows[-1][7:10]) - rig.valid.truth_deg)
+    err = wrap_deg(np.degrees(rig.rows[-1][7:10]) - rig.valid.truth_deg)
     assert len(rig.rows) > n and np.all(np.abs(err) < 0.01)

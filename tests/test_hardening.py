@@ -58,8 +58,8 @@ from sim.generate import SimRun, generate  # noqa: E402
 from sim.scenarios import Scenario  # noqa: E402
 from sim.stream import StreamOptions, frames  # noqa: E402
 from support import (  # noqa: E402
-    EVENT_TIMEOUT_S, READY_TIMEOUT_S, kernel_drops, recv_stamped, roomy, softnet_dropped, tlog_frames, wait_for_room,
-    wait_until, wait_until_read,
+    EVENT_TIMEOUT_S, READY_TIMEOUT_S, StampedReceiver, kernel_drops, quat_angle_deg, roomy,
+    softnet_dropped, tlog_frames, wait_for_room, wait_until, wait_until_read, wrap_deg,
 )
 
 BIN = Path(sys.executable).parent
@@ -227,10 +227,6 @@ def truth_at(run: SimRun, t_sim: np.ndarray) -> np.ndarray:
     idx = np.clip(np.searchsorted(tt, t_sim - 1e-7), 0, len(tt) - 1)
     assert np.all(np.abs(tt[idx] - t_sim) < 1e-5), "output times are sample times"
     return run.exact.truth[idx]
-
-
-def wrap_deg(a: np.ndarray) -> np.ndarray:
-    return (a + 180.0) % 360.0 - 180.0
 
 
 def imu_frame(enc: mavlink.MAVLink, t_us: int, f: tuple, w: tuple, fields: int = 0b111111) -> bytes:
@@ -404,11 +400,6 @@ class LossyProxy:
         self._thread.join(EVENT_TIMEOUT_S)  # it may be waiting for room at the service
         self.rx.close()
         self.tx.close()
-
-
-def quat_angle_deg(q1: np.ndarray, q2: np.ndarray) -> np.ndarray:
-    dot = np.abs(np.sum(q1 * q2, axis=-1)) / (np.linalg.norm(q1, axis=-1) * np.linalg.norm(q2, axis=-1))
-    return np.degrees(2 * np.arccos(np.clip(dot, 0.0, 1.0)))
 
 
 def level_deg(f_mean: np.ndarray) -> np.ndarray:
@@ -626,39 +617,22 @@ def highres_block(usec: np.ndarray, f: tuple, w: tuple) -> tuple[bytes, int]:
     return buf.tobytes(), len(tmpl)
 
 
-class Client:
+class Client(StampedReceiver):
     """Receives the service's --out link with kernel receive stamps; keeps ATTITUDE, SYS_STATUS, HEARTBEAT."""
 
     def __init__(self) -> None:
-        self.sock = roomy(socket.socket(socket.AF_INET, socket.SOCK_DGRAM))
-        self.sock.bind(("127.0.0.1", 0))
-        self.port = self.sock.getsockname()[1]
         self.attitude: list[tuple[float, int]] = []  # (kernel arrival, time_boot_ms)
         self.sys_status: list[tuple[float, object]] = []
         self.heartbeat: list[tuple[float, object]] = []
-        self._parser = mavlink.MAVLink(None)
-        self._parser.robust_parsing = True
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, daemon=True)
-        self._thread.start()
+        super().__init__()
 
-    def _run(self) -> None:
-        while not self._stop.is_set():
-            if not select.select([self.sock], [], [], 0.05)[0]:
-                continue
-            for arrival, data in recv_stamped(self.sock):
-                for m in self._parser.parse_buffer(data) or []:
-                    if m.get_type() == "ATTITUDE":
-                        self.attitude.append((arrival, m.time_boot_ms))
-                    elif m.get_type() == "SYS_STATUS":
-                        self.sys_status.append((arrival, m))
-                    elif m.get_type() == "HEARTBEAT":
-                        self.heartbeat.append((arrival, m))
-
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join(2.0)
-        self.sock.close()
+    def take(self, arrival: float, m) -> None:  # type: ignore[no-untyped-def]
+        if m.get_type() == "ATTITUDE":
+            self.attitude.append((arrival, m.time_boot_ms))
+        elif m.get_type() == "SYS_STATUS":
+            self.sys_status.append((arrival, m))
+        elif m.get_type() == "HEARTBEAT":
+            self.heartbeat.append((arrival, m))
 
 
 @dataclass

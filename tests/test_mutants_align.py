@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from mavins.core import align
+from support import wrap_rad
 
 G = 9.80665
 OMEGA = 7.292115e-5  # rad/s, WGS-84 Earth rate
@@ -31,10 +32,6 @@ def c_bn(roll, pitch, yaw):
 
 ATTITUDES = [(r, p, y) for r in (0.0, 0.3, -0.4, 2.5) for p in (0.0, 0.2, -0.35)
              for y in (0.0, 0.7, 2.0, -1.2, -2.9, math.pi / 2, -math.pi / 2)]
-
-
-def wrap(a):
-    return (a + math.pi) % (2 * math.pi) - math.pi
 
 
 @pytest.mark.parametrize("roll, pitch, yaw", ATTITUDES)
@@ -61,7 +58,7 @@ def test_level_formula_at_a_known_point():
 def test_gyrocompass_gives_yaw(roll, pitch, yaw, lat):
     w_n = OMEGA * np.array([math.cos(lat), 0.0, -math.sin(lat)])
     w_b = c_bn(roll, pitch, yaw).T @ w_n
-    assert wrap(align.gyrocompass(w_b, roll, pitch) - yaw) == pytest.approx(0.0, abs=1e-9)
+    assert wrap_rad(align.gyrocompass(w_b, roll, pitch) - yaw) == pytest.approx(0.0, abs=1e-9)
 
 
 @pytest.mark.parametrize("roll, pitch, yaw", ATTITUDES)
@@ -70,7 +67,7 @@ def test_mag_heading_gives_yaw_with_declination(roll, pitch, yaw, decl):
     inc = math.radians(64.0)  # dip: mostly down, as at mid latitudes
     m_n = 0.48 * np.array([math.cos(inc) * math.cos(decl), math.cos(inc) * math.sin(decl), math.sin(inc)])
     m_b = c_bn(roll, pitch, yaw).T @ m_n
-    assert wrap(align.mag_heading(m_b, roll, pitch, decl) - yaw) == pytest.approx(0.0, abs=1e-12)
+    assert wrap_rad(align.mag_heading(m_b, roll, pitch, decl) - yaw) == pytest.approx(0.0, abs=1e-12)
 
 
 def test_mag_heading_declination_defaults_to_zero():

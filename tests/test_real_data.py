@@ -46,6 +46,7 @@ import pytest
 
 from mavins.core.rotation import quat_angle_between
 from mavins.core.runner import navigate
+from support import quat_angle_deg, wrap_deg
 
 DATA = Path(__file__).parents[1] / "data"
 BROAD_DT = 0.0035  # s, 285.714 Hz exactly
@@ -109,12 +110,6 @@ def rotvec_to_q(phi: np.ndarray) -> np.ndarray:
     if a < 1e-12:
         return np.array([1.0, 0.5 * phi[0], 0.5 * phi[1], 0.5 * phi[2]])
     return np.concatenate([[np.cos(0.5 * a)], np.sin(0.5 * a) / a * phi])
-
-
-def angles_deg(p: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """Rotation angle (deg) of p^-1 (x) q, row by row (atan2 form, like the core)."""
-    e = qmul(qconj(p), q)
-    return np.degrees(2.0 * np.arctan2(np.linalg.norm(e[..., 1:], axis=-1), np.abs(e[..., 0])))
 
 
 # Frame change of the BROAD conversion: q(NED <- ENU), DCM [[0,1,0],[1,0,0],[0,0,-1]].
@@ -232,7 +227,7 @@ def integrate(
     j = j[keep] - lag
     keep_j = np.all(np.isfinite(q_truth[j]), axis=1)
     q_sol, q_ref = sol[keep][keep_j, 10:14], q_truth[j[keep_j]]
-    return Window(sol[keep][keep_j, 0], q_sol, q_ref, angles_deg(q_sol, q_ref))
+    return Window(sol[keep][keep_j, 0], q_sol, q_ref, quat_angle_deg(q_sol, q_ref))
 
 
 # --- data and frames -------------------------------------------------------------
@@ -275,7 +270,7 @@ def test_truth_euler_columns_are_zyx_of_the_quaternion(name: str) -> None:
     q = truth[ok, 1:5]
     np.testing.assert_allclose(np.linalg.norm(q, axis=1), 1.0, atol=1e-7)
     e = euler_deg(q)
-    d = (e - truth[ok, 5:8] + 180.0) % 360.0 - 180.0  # roll near +-180 wraps
+    d = wrap_deg(e - truth[ok, 5:8])  # roll near +-180 wraps
     # Columns are rounded to 1e-5 deg; near pitch +-90 roll/yaw are ill-defined.
     away = np.abs(e[:, 1]) < 80.0
     assert np.abs(d[away]).max() < 1e-3
@@ -322,7 +317,7 @@ def test_euler_initial_state_reproduces_truth_quaternion(name: str) -> None:
     i = row_at(t, rec.truth[j, 0])
     z = np.zeros((4, 3))
     sol = navigate(t[i : i + 4], z, z, init, data="rates", imu_rates=rec.meta["rate_semantics"], samples=1, earth_model="none")
-    assert angles_deg(sol[-1, 10:14], q0) < 1e-7
+    assert quat_angle_deg(sol[-1, 10:14], q0) < 1e-7
 
 
 # --- the sampled-rate path against the README's update rule ----------------------
@@ -363,9 +358,9 @@ def test_sampled_rates_follow_readme_update_rule() -> None:
     ref_c = reference_integration(q0, w, BROAD_DT, intra_coning=True)
     one = integrate(rec, t0, t1, samples=1)
     two = integrate(rec, t0, t1, samples=2)
-    assert angles_deg(one.q_sol, ref[1:]).max() < 1e-6
-    assert angles_deg(two.q_sol, ref_c[2::2]).max() < 2e-3
-    assert angles_deg(ref_c[-1], ref[-1]) > 0.05  # the term is real, not lost
+    assert quat_angle_deg(one.q_sol, ref[1:]).max() < 1e-6
+    assert quat_angle_deg(two.q_sol, ref_c[2::2]).max() < 2e-3
+    assert quat_angle_deg(ref_c[-1], ref[-1]) > 0.05  # the term is real, not lost
     # The core's angle function agrees with the one used here.
     assert np.degrees(quat_angle_between(one.q_sol[-1], one.q_ref[-1])) == pytest.approx(one.end, abs=1e-9)
 

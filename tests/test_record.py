@@ -34,7 +34,7 @@ import pyarrow as pa
 import pytest
 from rerun.chunk import RrdReader
 
-from support import EVENT_TIMEOUT_S, READY_TIMEOUT_S
+from support import EVENT_TIMEOUT_S, READY_TIMEOUT_S, wrap_deg
 
 ROOT = Path(__file__).resolve().parents[1]
 ULG = ROOT / "data" / "px4-sample" / "sample.ulg"
@@ -118,10 +118,6 @@ def quat_xyzw_to_euler_deg(q: np.ndarray) -> np.ndarray:
     pitch = np.arcsin(np.clip(2 * (w * y - z * x), -1, 1))
     yaw = np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
     return np.degrees(np.stack([roll, pitch, yaw], axis=1))
-
-
-def wrap_deg(a: np.ndarray) -> np.ndarray:
-    return (a + 180.0) % 360.0 - 180.0
 
 
 # -- the runs ----------------------------------------------------------------------------------

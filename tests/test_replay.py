@@ -25,14 +25,12 @@ room over what was measured (max 1.95 deg, docs/service.md).
 from __future__ import annotations
 
 import gzip
-import signal
-import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from support import ENV, EVENT_TIMEOUT_S, MAVINS, REPO, free_udp_port, mavins, wait_for_line, wait_until_read
+from support import EVENT_TIMEOUT_S, REPO, free_udp_port, mavins, quat_angle_deg, running_service, wait_until_read
 
 PX4 = REPO / "data" / "px4-sample"
 
@@ -54,22 +52,12 @@ def live(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, str]:
     port = free_udp_port()
     tlog, live_csv = tmp_path / "live.tlog", tmp_path / "live.csv"
     log_path = tmp_path / "service.log"
-    with open(log_path, "w") as log:
-        svc = subprocess.Popen([*MAVINS, "run", "--master", f"udpin:127.0.0.1:{port}", "--tlog", str(tlog),
-                                "-o", str(live_csv), *NAV_OPTIONS], stdout=log, stderr=subprocess.STDOUT, env=ENV,
-                               cwd=tmp_path)
-    try:
-        wait_for_line(log_path, "ready: listening on", svc)
+    with running_service(log_path, "--master", f"udpin:127.0.0.1:{port}", "--tlog", str(tlog), "-o", str(live_csv),
+                         *NAV_OPTIONS, cwd=tmp_path, stop_timeout=EVENT_TIMEOUT_S) as svc:
         sim = mavins("sim", "flight", "--grade", "consumer", "--seed", "3", "--duration", "40", "--speed", "10",
                      "--stream", f"udpout:127.0.0.1:{port}", cwd=tmp_path)
         assert sim.returncode == 0, sim.stderr
         wait_until_read(port, svc)  # the service has read everything queued (an event, not a pause)
-        svc.send_signal(signal.SIGTERM)
-        svc.wait(EVENT_TIMEOUT_S)
-    finally:
-        if svc.poll() is None:
-            svc.kill()
-            svc.wait(5)
     service_log = log_path.read_text()
     assert svc.returncode == 0, service_log
     return tlog, live_csv, service_log
@@ -111,13 +99,6 @@ def _px4_align_end() -> float:
     return float(t[np.searchsorted(t, t[0] + PX4_ALIGN_S)])
 
 
-def _qmul(p: np.ndarray, q: np.ndarray) -> np.ndarray:
-    pw, px, py, pz = p.T
-    qw, qx, qy, qz = q.T
-    return np.stack([pw * qw - px * qx - py * qy - pz * qz, pw * qx + px * qw + py * qz - pz * qy,
-                     pw * qy - px * qz + py * qw + pz * qx, pw * qz + px * qy - py * qx + pz * qw], -1)
-
-
 def px4_errors(nav_csv: Path, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Solution times and the angle (deg) between our attitude and PX4's at those times (nlerp of truth)."""
     nav = np.loadtxt(nav_csv, delimiter=",", skiprows=1)
@@ -130,8 +111,7 @@ def px4_errors(nav_csv: Path, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray
     w = ((t - t0) / (t1 - t0))[:, None]
     qt = (1 - w) * q0 + w * q1
     qt /= np.linalg.norm(qt, axis=1)[:, None]
-    d = _qmul(qt * np.array([1.0, -1.0, -1.0, -1.0]), q)
-    return t, np.degrees(2 * np.arccos(np.clip(np.abs(d[:, 0]), 0.0, 1.0)))
+    return t, quat_angle_deg(qt, q)
 
 
 @pytest.fixture(scope="module")

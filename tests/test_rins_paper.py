@@ -23,6 +23,7 @@ import pytest
 from mavins.core.rotation import quat_to_euler
 from mavins.core.runner import navigate
 from sim import rins
+from support import quat_error
 
 ALPHA = math.radians(2.0)
 WC = 7.5 * 2.0 * math.pi
@@ -48,13 +49,6 @@ def conj(q: np.ndarray) -> np.ndarray:
     return q * np.array([1.0, -1.0, -1.0, -1.0])
 
 
-def rotvec(q: np.ndarray) -> np.ndarray:
-    q = np.where(q[..., :1] < 0.0, -q, q)
-    v = np.linalg.norm(q[..., 1:], axis=-1)
-    k = np.where(v > 0.0, 2.0 * np.arctan2(v, q[..., 0]) / np.where(v > 0.0, v, 1.0), 2.0)
-    return q[..., 1:] * k[..., None]
-
-
 def run(n: int, turntable, duration: float, coning: bool = True, alpha: float = ALPHA):
     """navigate() on the paper's motion; update times and reference-frame error rows (rad)."""
     h = T / n
@@ -65,7 +59,7 @@ def run(n: int, turntable, duration: float, coning: bool = True, alpha: float = 
     sol = navigate(m.t, m.dtheta, m.dv, init, samples=n, earth_model="none", coning=coning)
     q_true = m.q[n - 1 :: n]
     assert len(sol) == len(q_true) and sol[-1, 0] == pytest.approx(m.t[-1])
-    return sol[:, 0], rotvec(qmul(sol[:, 10:14], conj(q_true)))
+    return sol[:, 0], quat_error(sol[:, 10:14], q_true)
 
 
 def drift(t: np.ndarray, phi: np.ndarray) -> float:

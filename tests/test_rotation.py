@@ -7,6 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from mavins.core import rotation as rot
+from support import quat_angle, quat_error, wrap_rad
 
 angle = st.floats(-np.pi, np.pi, allow_nan=False)
 pitch_angle = st.floats(-1.55, 1.55, allow_nan=False)
@@ -120,3 +121,50 @@ def test_angle_between_small_and_large():
     q = rot.rotvec_to_quat(np.array([0.0, 0.0, a]))
     assert abs(rot.quat_angle_between(np.array([1.0, 0, 0, 0]), q) - a) < 1e-20
     assert abs(rot.quat_angle_between(q, -q)) < 1e-15  # q and -q are the same rotation
+
+
+def test_wrap_pi_agrees_with_the_tests_own_wrap():
+    """rotation.wrap_pi against support.wrap_rad (written apart from it), the +-pi edges included."""
+    rng = np.random.default_rng(20)
+    edges = [0.0, np.pi, -np.pi, 2 * np.pi, -2 * np.pi, 3 * np.pi, -3 * np.pi, 1e-300, -1e-300]
+    edges += [np.nextafter(e, d) for e in (np.pi, -np.pi) for d in (-4.0, 4.0)]
+    a = np.concatenate([rng.uniform(-60.0, 60.0, 3000), rng.uniform(-4.0, 4.0, 3000), edges])
+    got = np.array([rot.wrap_pi(x) for x in a])
+    want = wrap_rad(a)
+    assert np.all((got > -np.pi) & (got <= np.pi)) and np.all((want > -np.pi) & (want <= np.pi))
+    inside = np.abs(want) < np.pi - 1e-12  # at +-pi one rounding may land either side of the cut
+    np.testing.assert_allclose(got[inside], want[inside], rtol=0, atol=1e-13)
+    np.testing.assert_allclose(wrap_rad(got - want), 0.0, rtol=0, atol=1e-13)
+    assert rot.wrap_pi(np.pi) == wrap_rad(np.pi) == np.pi
+    assert rot.wrap_pi(-np.pi) == wrap_rad(-np.pi) == np.pi
+
+
+def test_quat_angle_agrees_with_the_tests_own_metric():
+    """quat_angle_between and quat_angle_rows against support.quat_angle: random pairs, the same
+    attitude, its negative, half turns (p.q = 0), near half turns and tiny angles."""
+    rng = np.random.default_rng(21)
+
+    def unit(x: np.ndarray) -> np.ndarray:
+        return x / np.linalg.norm(x, axis=-1, keepdims=True)
+
+    p = unit(rng.standard_normal((600, 4)))
+    q = unit(rng.standard_normal((600, 4)))
+    ortho = unit(q - np.sum(q * p, axis=1, keepdims=True) * p)  # p^-1 (x) ortho has w = 0: a half turn
+    q[100:200] = ortho[100:200]
+    q[200:300] = unit(ortho[200:300] + 1e-9 * p[200:300])  # a half turn less about 2e-9 rad
+    q[300:400] = unit(p[300:400] + 1e-9 * ortho[300:400])  # about 2e-9 rad
+    q[400:450] = p[400:450]
+    q[450:500] = -p[450:500]  # the same rotation
+    q[500:550] = -ortho[500:550]
+    want = quat_angle(p, q)
+    rows = rot.quat_angle_rows(p, q)
+    one = np.array([rot.quat_angle_between(a, b) for a, b in zip(p, q)])
+    np.testing.assert_allclose(rows, want, rtol=1e-12, atol=2e-15)
+    np.testing.assert_allclose(one, want, rtol=1e-12, atol=2e-15)
+    np.testing.assert_allclose(want[100:200], np.pi, rtol=0, atol=2e-15)
+    np.testing.assert_allclose(rows[100:200], np.pi, rtol=0, atol=2e-15)
+    assert np.all(rows[400:500] <= 2e-15) and np.all(want[400:500] <= 2e-15)
+    err = rot.quat_error_rows(q, p)
+    np.testing.assert_allclose(np.linalg.norm(err, axis=1), want, rtol=1e-12, atol=4e-15)
+    away = np.r_[0:100, 300:500, 550:600]  # at a half turn +phi and -phi are the same rotation
+    np.testing.assert_allclose(err[away], quat_error(q, p)[away], rtol=1e-12, atol=4e-15)

@@ -70,8 +70,8 @@ from pymavlink import mavutil  # noqa: E402
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 from support import (  # noqa: E402
-    EVENT_TIMEOUT_S, READY_TIMEOUT_S, kernel_drops, recv_stamped, roomy, summary, wait_for_line, wait_for_room,
-    wait_until, wait_until_read,
+    EVENT_TIMEOUT_S, READY_TIMEOUT_S, StampedReceiver, kernel_drops, quat_angle_deg, recv_stamped, roomy, summary,
+    wait_for_line, wait_for_room, wait_until, wait_until_read, wrap_deg, wrap_rad,
 )
 
 # -- the scenario and what is derived from it --------------------------------
@@ -163,30 +163,18 @@ class Tee:
         self.tx.close()
 
 
-class Client:
+class Client(StampedReceiver):
     """A plain pymavlink client (parser) on 127.0.0.1:port, the service's --out; kernel receive stamps kept."""
 
     def __init__(self) -> None:
-        self.sock = roomy(socket.socket(socket.AF_INET, socket.SOCK_DGRAM))
-        self.sock.bind(("127.0.0.1", 0))
-        self.port = self.sock.getsockname()[1]
         self.msgs: list[mavlink.MAVLink_message] = []
         self.arrival: list[float] = []  # kernel receive time (time.time() scale) of each message
-        self._parser = mavlink.MAVLink(None)
-        self._parser.robust_parsing = True
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, daemon=True)
-        self._thread.start()
+        super().__init__()
 
-    def _run(self) -> None:
-        while not self._stop.is_set():
-            if not select.select([self.sock], [], [], 0.05)[0]:
-                continue
-            for stamp, data in recv_stamped(self.sock):
-                for m in self._parser.parse_buffer(data) or []:
-                    if m.get_type() != "BAD_DATA":
-                        self.msgs.append(m)
-                        self.arrival.append(stamp)
+    def take(self, stamp: float, m: mavlink.MAVLink_message) -> None:
+        if m.get_type() != "BAD_DATA":
+            self.msgs.append(m)
+            self.arrival.append(stamp)
 
     def heard_after(self, t: float, name: str = "HEARTBEAT") -> list[mavlink.MAVLink_message]:
         """Messages of a type that arrived after wall time ``t`` (sent after it: loopback delivers at once)."""
@@ -194,11 +182,6 @@ class Client:
 
     def drops(self) -> int:
         return kernel_drops(self.port)
-
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join(2.0)
-        self.sock.close()
 
 
 def parse(datagrams: list[bytes]) -> list[mavlink.MAVLink_message]:
@@ -270,12 +253,6 @@ def ned_from(lat_deg, lon_deg, h, origin: tuple[float, float, float]) -> np.ndar
     sl, cl, so, co = math.sin(lat0), math.cos(lat0), math.sin(lon0), math.cos(lon0)
     r = np.array([[-sl * co, -sl * so, cl], [-so, co, 0.0], [-cl * co, -cl * so, -sl]])
     return d @ r.T
-
-
-def quat_angle_deg(q1: np.ndarray, q2: np.ndarray) -> np.ndarray:
-    """Angle (deg) of the rotation between unit quaternions [w,x,y,z], row by row."""
-    dot = np.abs(np.sum(q1 * q2, axis=-1)) / (np.linalg.norm(q1, axis=-1) * np.linalg.norm(q2, axis=-1))
-    return np.degrees(2 * np.arccos(np.clip(dot, 0.0, 1.0)))
 
 
 def dcm(q: np.ndarray) -> np.ndarray:
@@ -439,7 +416,7 @@ def test_attitude_within_limit_after_two_minute_flight(flight_run: Run) -> None:
     att = {m.time_boot_ms: m for m in pub["ATTITUDE"]}
     for m, s in pairs[:: max(1, len(pairs) // 200)]:
         a = att[m.time_boot_ms]
-        d = [abs((x - y + math.pi) % (2 * math.pi) - math.pi) for x, y in
+        d = [abs(wrap_rad(x - y)) for x, y in
              ((a.roll, s.roll), (a.pitch, s.pitch), (a.yaw, s.yaw))]
         assert math.degrees(max(d)) < ATT_LIMIT_DEG * 1.5 + 1e-4
 
@@ -549,7 +526,7 @@ def test_global_position_alt_is_amsl_and_matches_local(flight_run: Run) -> None:
         assert np.allclose(ned, [lp.x, lp.y, lp.z], atol=0.02)
     # hdg: the yaw of the same set in centidegrees, 0..35999
     for m, a in [(st["GLOBAL_POSITION_INT"], st["ATTITUDE"]) for st in sets][::25]:
-        assert abs((m.hdg - math.degrees(a.yaw) * 100 + 18000) % 36000 - 18000) <= 1
+        assert abs(wrap_deg(m.hdg / 100.0 - math.degrees(a.yaw))) <= 0.01
 
 
 def _reassemble(msgs) -> list[str]:  # type: ignore[no-untyped-def]

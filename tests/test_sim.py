@@ -42,6 +42,7 @@ from sim import motion
 from sim.generate import generate, write
 from sim.scenarios import ScenarioError, builtin_names, load
 from sim.trajectory import SimResult, Trajectory, instant_rates, simulate
+from support import quat_angle
 
 LAT, LON, H = 47.397742, 8.545594, 488.0
 
@@ -115,13 +116,8 @@ def qeuler(roll, pitch, yaw) -> np.ndarray:
     return qmul(qz, qmul(qy, qx))
 
 
-def qangle(p: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """Angle (rad) between attitudes, accurate near zero (not arccos of the dot)."""
-    return 2.0 * np.arcsin(np.clip(np.linalg.norm(qmul(qconj(p), q)[..., 1:], axis=-1), 0.0, 1.0))
-
-
 def same_rotation(p: np.ndarray, q: np.ndarray) -> float:
-    return float(np.max(qangle(p, q)))
+    return float(np.max(quat_angle(p, q)))
 
 
 # --- helpers --------------------------------------------------------------------------
@@ -190,7 +186,7 @@ def round_trip(res: SimResult, **options) -> dict[str, float]:
         hor=float(pos_error_m(sol, truth).max()),
         h=float(np.abs(sol[:, 3] - truth[:, 3]).max()),
         v=float(np.abs(sol[:, 4:7] - truth[:, 4:7]).max()),
-        att=float(qangle(sol[:, 10:14], truth[:, 10:14]).max()),
+        att=float(quat_angle(sol[:, 10:14], truth[:, 10:14]).max()),
     )
 
 
