@@ -60,6 +60,7 @@ class EngineConfig:
     vertical: str = _SD.vertical
     position: str = _SD.position
     l_every: int = _SD.l_every
+    frame: str = _SD.frame
     motion_gyro: float = 0.1  # rad/s: a sample above this restarts the alignment
     motion_accel: float = 1.5  # m/s^2: |f| - g beyond this restarts the alignment
     max_gap: float = 1.0  # s: a longer gap in sensor time is not integrated; the solution is degraded

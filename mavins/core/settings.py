@@ -53,6 +53,9 @@ SETTINGS: tuple[Setting, ...] = (
             choices=("rectangular", "trapezoidal", "simpson")),
     Setting("l_every", "--l-every", 1, "attitude updates per slow (l) cycle: Earth rate, transport rate, gravity",
             int_range=(1, None), metavar="M"),
+    Setting("frame", "--frame", "geographic", "mechanisation frame (Zhang & Sun ch. 2): geographic (north-pointing, "
+            "not beyond |lat| 89.5 deg), wander or free azimuth, or inertial (ECI); the output stays NED",
+            choices=("geographic", "wander", "free", "inertial")),
 )
 
 BY_NAME: dict[str, Setting] = {s.name: s for s in SETTINGS}
@@ -72,6 +75,7 @@ class Strapdown:
     vertical: str = BY_NAME["vertical"].default  # type: ignore[assignment]
     position: str = BY_NAME["position"].default  # type: ignore[assignment]
     l_every: int = BY_NAME["l_every"].default  # type: ignore[assignment]
+    frame: str = BY_NAME["frame"].default  # type: ignore[assignment]
 
     def keywords(self) -> dict[str, object]:
         """The settings as ``strapdown.make_config`` keywords."""

@@ -70,10 +70,13 @@ CFG_CONING = 6  # 1 = coning and sculling corrections on
 CFG_POSINT = 7  # 0 rectangular, 1 trapezoidal, 2 Simpson
 CFG_L_EVERY = 8  # M, k cycles per l cycle
 CFG_SAMPLED = 9  # push_rate: 1 = instantaneous samples, 0 = interval averages
-CFG_SIZE = 10
+CFG_FRAME = 10  # mechanisation frame, FRAMES
+CFG_SIZE = 11
 
 POSINT = {"rectangular": 0, "trapezoidal": 1, "simpson": 2}
 ORDERS = {"1": 1, "2": 2, "3": 3, "4": 4, "exact": 0}
+GEOGRAPHIC, WANDER, FREE, INERTIAL = 0, 1, 2, 3
+FRAMES = {"geographic": GEOGRAPHIC, "wander": WANDER, "free": FREE, "inertial": INERTIAL}
 
 # --- state vector ---------------------------------------------------------
 S_T = 0  # time of the last k update (s)
@@ -132,6 +135,7 @@ def make_config(
     position: str = _DEFAULT.position,
     l_every: int = _DEFAULT.l_every,
     imu_rates: str = _DEFAULT.imu_rates,
+    frame: str = _DEFAULT.frame,
 ) -> np.ndarray:
     """Build the configuration vector from the settings of core/settings.py (their names and defaults)."""
     if not 1 <= samples <= MAX_SAMPLES:
@@ -152,6 +156,10 @@ def make_config(
         raise ValueError("l_every must be >= 1")
     if imu_rates not in ("averaged", "sampled"):
         raise ValueError(f"imu_rates must be averaged or sampled, got {imu_rates!r}")
+    if frame not in FRAMES:
+        raise ValueError(f"frame must be one of {', '.join(FRAMES)}, got {frame!r}")
+    if frame != "geographic":
+        raise ValueError(f"frame {frame!r} is not implemented yet")
     cfg = np.zeros(CFG_SIZE)
     cfg[CFG_SAMPLES] = samples
     cfg[CFG_DCM] = 1.0 if attitude == "dcm" else 0.0
@@ -163,6 +171,7 @@ def make_config(
     cfg[CFG_POSINT] = POSINT[position]
     cfg[CFG_L_EVERY] = l_every
     cfg[CFG_SAMPLED] = 1.0 if imu_rates == "sampled" else 0.0
+    cfg[CFG_FRAME] = FRAMES[frame]
     return cfg
 
 
