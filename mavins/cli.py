@@ -232,6 +232,24 @@ class _Aiding:
         return kinds
 
 
+class _ImuList:
+    """--imus: all, or two or more IMU numbers 0..2."""
+
+    def describe(self, metavar: str | None = None) -> str:
+        return "all or two or more of 0,1,2"
+
+    def __call__(self, text: str) -> tuple[int, ...]:
+        if text.strip() == "all":
+            return ()
+        try:
+            ids = tuple(sorted({int(x) for x in text.split(",")}))
+        except ValueError:
+            ids = ()
+        if len(ids) < 2 or not all(0 <= i <= 2 for i in ids):
+            raise argparse.ArgumentTypeError(f"expected all or two or more of 0,1,2 separated by commas, got {text!r}")
+        return ids
+
+
 class _Outage:
     """START,END: an interval of sensor time (s)."""
 
@@ -479,6 +497,12 @@ def _nav_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--imu", default="auto", choices=("auto", "highres", "raw", "scaled", "scaled2", "scaled3"),
                    help="IMU message to navigate on (auto = the first one seen)")
     g.add_argument("--imu-id", type=_positive_int(0, 255), default=None, metavar="ID", help="id field of HIGHRES_IMU/RAW_IMU to use")
+    g.add_argument("--imus", type=_ImuList(), default=None, metavar="all|ID,ID..",
+                   help="fuse several IMUs with fault detection and isolation: HIGHRES_IMU ids, or RAW_IMU, "
+                        "SCALED_IMU2, SCALED_IMU3 as 0, 1, 2; all = every one seen in the first second "
+                        "(docs/redundancy.md)")
+    g.add_argument("--false-alarm", type=_real(0.0, 0.5, above=True), default=1e-6, metavar="P",
+                   help="with --imus: design false-alarm probability of each test")
     g.add_argument("--raw-acc-scale", type=_real(**POSITIVE), default=9.80665e-3, metavar="M_S2",
                    help="RAW_IMU accelerometer scale, m/s^2 per count (ArduPilot: 1 mG)")
     g.add_argument("--raw-gyro-scale", type=_real(**POSITIVE), default=1e-3, metavar="RAD_S",
@@ -587,7 +611,8 @@ def _ingest_config(args: argparse.Namespace):  # type: ignore[no-untyped-def]
 
     return IngestConfig(message=_IMU_NAMES[args.imu], imu_id=args.imu_id, target_system=args.target_system,
                         raw_acc_scale=args.raw_acc_scale, raw_gyro_scale=args.raw_gyro_scale,
-                        max_accel=args.max_accel, max_gyro=math.radians(args.max_gyro))
+                        max_accel=args.max_accel, max_gyro=math.radians(args.max_gyro),
+                        imus=getattr(args, "imus", None), false_alarm=getattr(args, "false_alarm", 1e-6))
 
 
 def _add_run(sub: argparse._SubParsersAction) -> None:

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from .core.frames import local_ned
 from .core.records import ImuSample, Solution
 from .engine import Engine, EngineConfig
+from .imuset import ImuSet
 from .link.ingest import IMU_MESSAGES, Ingest, IngestConfig
 from .link.mavlink import mavlink
 from .record.sink import Sink
@@ -46,10 +47,15 @@ class Pipeline:
     last_sample: ImuSample | None = None
     recorder: Sink | None = None
     _outputs: int = 0
+    imuset: ImuSet | None = field(init=False, default=None)
 
     def __post_init__(self) -> None:
         self.engine = Engine(self.engine_cfg)
         self.ingest = Ingest(self.ingest_cfg)
+        if self.ingest_cfg.imus is not None:  # --imus: several streams fused (docs/redundancy.md)
+            self.imuset = ImuSet(self.ingest_cfg, self.ingest_cfg.imus, self.engine_cfg.filter.spec,
+                                 self.ingest_cfg.false_alarm)
+            self.ingest = self.imuset.primary
 
     @property
     def vehicle_sysid(self) -> int | None:
@@ -89,16 +95,17 @@ class Pipeline:
         return None
 
     def _imu(self, msg: object) -> Solution | None:
-        last = self.ingest.last_t
-        smp = self.ingest.sample(msg)
+        src: Ingest | ImuSet = self.imuset if self.imuset is not None else self.ingest
+        last = src.last_t
+        smp = src.sample(msg)
         if smp is None:
             t_new = _msg_time(msg)
             if last is not None and t_new is not None and t_new < last - RESTART_JUMP and \
-                    self.ingest.last_reason == "time_backwards":
+                    src.last_reason == "time_backwards":
                 # the autopilot restarted (its clock went back): start over
-                self.ingest.reset_time()
+                src.reset_time()
                 self.engine.restart(f"sensor time went back from {last:.3f} to {t_new:.3f} s")
-                smp = self.ingest.sample(msg)
+                smp = src.sample(msg)
             if smp is None:
                 return None
         self.last_sample = smp
@@ -130,6 +137,8 @@ class Pipeline:
     def take_events(self) -> list[tuple[str, str]]:
         """State changes and warnings since the last call, drained once (also sent to the recorder)."""
         events = self.engine.take_events()
+        if self.imuset is not None:
+            events += self.imuset.take_events()
         if self.recorder is not None:
             t = self.last_sample.t if self.last_sample is not None else None
             for level, text in events:
