@@ -115,7 +115,9 @@ S_NL = 107  # k cycles since the last l cycle
 S_KN = 108  # l-cycle 1/(R_N + h) (1/m): w_en^n = [v_E k_E, -v_N k_N, -v_E k_T]
 S_KE = 109  # l-cycle 1/(R_E + h) (1/m)
 S_KT = 110  # l-cycle tan L/(R_E + h) (1/m)
-S_SIZE = 111
+S_MW = 111  # wander/free: l-cycle horizontal transport-rate matrix M (1/m), rho_h^w = M v_h^w, 2x2 row-major
+S_RZ = 115  # wander/free: l-cycle vertical transport rate (rad/s): 0 (wander), Omega sin L (free)
+S_SIZE = 116
 
 OUT_COLUMNS = ("t", "lat", "lon", "h", "vn", "ve", "vd", "roll", "pitch", "yaw", "qw", "qx", "qy", "qz")
 OUT_SIZE = len(OUT_COLUMNS)
@@ -158,8 +160,10 @@ def make_config(
         raise ValueError(f"imu_rates must be averaged or sampled, got {imu_rates!r}")
     if frame not in FRAMES:
         raise ValueError(f"frame must be one of {', '.join(FRAMES)}, got {frame!r}")
-    if frame != "geographic":
+    if frame in ("free", "inertial"):
         raise ValueError(f"frame {frame!r} is not implemented yet")
+    if frame != "geographic" and earth_model != "wgs84":
+        raise ValueError(f"frame {frame!r} needs the WGS-84 Earth (earth_model wgs84)")
     cfg = np.zeros(CFG_SIZE)
     cfg[CFG_SAMPLES] = samples
     cfg[CFG_DCM] = 1.0 if attitude == "dcm" else 0.0
@@ -213,9 +217,31 @@ def init_state(
 
 
 @kernel
+def _wander_latlon(s: np.ndarray) -> tuple[float, float, float, float]:
+    """Latitude, longitude (rad) and the wander angle's cosine and sine from ``C_w^e``.
+
+    ``C_w^e = C_n^e Rz(alpha)`` (alpha: azimuth of the w frame's x axis from north), so its
+    third row is ``[cos L cos alpha, -cos L sin alpha, -sin L]`` and its third column the down
+    vector in e, ``-[cos L cos lon, cos L sin lon, sin L]``. Exactly at a pole (``cos L = 0``
+    in double precision) alpha is taken as 0: w's x axis is north and its y axis east, and the
+    longitude is that of the east direction, as in :func:`earth.latlon_from_cne`.
+    """
+    c = S_CNE
+    c20, c21, c22 = s[c + 6], s[c + 7], s[c + 8]
+    cl = np.hypot(c20, c21)
+    lat = np.arctan2(-c22, cl)
+    if cl == 0.0:
+        return lat, np.arctan2(-s[c + 1], s[c + 4]), 1.0, 0.0
+    return lat, np.arctan2(-s[c + 5], -s[c + 2]), c20 / cl, -c21 / cl
+
+
+@kernel
 def position(s: np.ndarray, cfg: np.ndarray) -> tuple[float, float, float]:
     """Latitude, longitude (rad) and height (m) of the state."""
     if cfg[CFG_EARTH] > 0.5:
+        if int(cfg[CFG_FRAME]) != GEOGRAPHIC:
+            lat, lon, ca, sa = _wander_latlon(s)
+            return lat, lon, s[S_H]
         c = S_CNE
         lat, lon = earth.latlon_from_cne_s(s[c + 1], s[c + 4], s[c + 6], s[c + 7], s[c + 8])
         return lat, lon, s[S_H]
@@ -237,7 +263,14 @@ def sync_position(s: np.ndarray, cfg: np.ndarray) -> None:
 
 @kernel
 def solution_row(s: np.ndarray, cfg: np.ndarray, out: np.ndarray) -> None:
-    """Write ``t,lat,lon,h,vn,ve,vd,roll,pitch,yaw,qw,qx,qy,qz`` (rad) into out."""
+    """Write ``t,lat,lon,h,vn,ve,vd,roll,pitch,yaw,qw,qx,qy,qz`` (rad) into out.
+
+    Every frame reports NED attitude and velocity: in the wander and free-azimuth frames
+    ``v^n = Rz(alpha) v^w`` and ``C_b^n = Rz(alpha) C_b^w`` (docs/algorithms.md).
+    """
+    if int(cfg[CFG_FRAME]) != GEOGRAPHIC:
+        _wander_row(s, out)
+        return
     out[0] = s[S_T]
     out[1] = s[S_LATC]
     out[2] = s[S_LONC]
@@ -250,6 +283,27 @@ def solution_row(s: np.ndarray, cfg: np.ndarray, out: np.ndarray) -> None:
     sign = -1.0 if s[S_Q] < 0.0 else 1.0  # the same rotation with a non-negative scalar part
     for a in range(4):
         out[10 + a] = sign * s[S_Q + a]
+
+
+@kernel
+def _write_ned_row(out: np.ndarray, t: float, lat: float, lon: float, h: float, vn: float, ve: float, vd: float,
+                   c: Mat9) -> None:
+    """A solution row from NED velocity (m/s) and ``C_b^n`` (row-major), angles in rad."""
+    out[0], out[1], out[2], out[3] = t, lat, lon, h
+    out[4], out[5], out[6] = vn, ve, vd
+    out[7], out[8], out[9] = dcm_to_euler_s(c[0], c[1], c[3], c[4], c[6], c[7], c[8])
+    out[10], out[11], out[12], out[13] = dcm_to_quat_s(c)
+
+
+@kernel
+def _wander_row(s: np.ndarray, out: np.ndarray) -> None:
+    """Solution row of the wander and free-azimuth frames: turned by the wander angle into NED."""
+    lat, lon, ca, sa = _wander_latlon(s)
+    vx, vy = s[S_V], s[S_V + 1]
+    w0, w1, w2, w3, w4, w5, w6, w7, w8 = _get9(s, S_C)
+    c = (ca * w0 - sa * w3, ca * w1 - sa * w4, ca * w2 - sa * w5,
+         sa * w0 + ca * w3, sa * w1 + ca * w4, sa * w2 + ca * w5, w6, w7, w8)
+    _write_ned_row(out, s[S_T], lat, lon, s[S_H], ca * vx - sa * vy, sa * vx + ca * vy, s[S_V + 2], c)
 
 
 # --- state access for the stateful shells (engine, filter) ------------------
@@ -352,6 +406,9 @@ def _l_cycle(s: np.ndarray, cfg: np.ndarray, T: float, lat: float, h: float, vmx
             s[S_WEN + i] = 0.0
         s[S_G] = s[S_G0]
         return
+    if int(cfg[CFG_FRAME]) != GEOGRAPHIC:
+        _l_cycle_wander(s, cfg, T, h, vmx, vmy, vmz)
+        return
     lat_mid = lat + 0.5 * T * vmx * s[S_KN]
     h_mid = h - 0.5 * T * vmz
     kn, ke, kt, wn, wd, g = earth.nav_terms(lat_mid, h_mid)
@@ -359,6 +416,60 @@ def _l_cycle(s: np.ndarray, cfg: np.ndarray, T: float, lat: float, h: float, vmx
     s[S_WIE], s[S_WIE + 1], s[S_WIE + 2] = wn, 0.0, wd
     s[S_WEN], s[S_WEN + 1], s[S_WEN + 2] = vmy * ke, -vmx * kn, -vmy * kt
     s[S_G] = g
+
+
+@kernel
+def _wander_terms(s: np.ndarray, r0: float, r1: float, r2: float, h: float, free: bool) -> float:
+    """Transport-rate coefficients of the wander (or free-azimuth) frame at the point whose
+    ``C_w^e`` third row is ``(r0, r1, r2) = (cos L cos alpha, -cos L sin alpha, -sin L)``, height
+    h (m); stores them in S_MW, S_RZ and returns gravity (m/s^2, down).
+
+    The NED transport rate ``[v_E k_E, -v_N k_N]`` turned into w (``v^n = Rz(alpha) v^w``) is
+    ``M v_h^w`` with ``M = (k_E + k_N)/2 J + kappa [[-2 r0 r1, r0^2 - r1^2], [r0^2 - r1^2, 2 r0 r1]]``,
+    ``J = [[0, 1], [-1, 0]]``, ``kappa = (k_E - k_N)/(2 cos^2 L) = -e^2 R_E k_E k_N / (2(1 - e^2
+    sin^2 L))``: no tan L and no alpha, regular at the poles ([ZS] 2.2; docs/algorithms.md).
+    Vertical: 0 in the wander frame, ``-w_ie,z^w = Omega sin L`` in the free-azimuth frame
+    ([ZS] 2.3: the frame does not turn about its vertical relative to inertial space).
+    """
+    sl = -r2
+    r_n, r_e = earth.radii_sin(sl)
+    kn = 1.0 / (r_n + h)
+    ke = 1.0 / (r_e + h)
+    a = 0.5 * (ke + kn)
+    kap = -0.5 * earth.E2 * r_e / (1.0 - earth.E2 * sl * sl) * ke * kn
+    d = r0 * r0 - r1 * r1
+    x2 = -2.0 * r0 * r1
+    s[S_MW], s[S_MW + 1], s[S_MW + 2], s[S_MW + 3] = kap * x2, a + kap * d, kap * d - a, -kap * x2
+    s[S_RZ] = earth.OMEGA * sl if free else 0.0
+    return earth.gravity_sin(sl, r_e, h)
+
+
+@kernel
+def _l_cycle_wander(s: np.ndarray, cfg: np.ndarray, T: float, h: float, vmx: float, vmy: float,
+                    vmz: float) -> None:
+    """The l cycle of the wander and free-azimuth frames ([ZS] 2.2, 2.3).
+
+    Earth rate ``w_ie^w = Omega (C_w^e)^T z_e = Omega r`` (r: third row of C_w^e), transport rate
+    ``[M v_h, rho_z]`` and gravity at the extrapolated mid-interval point, whose third row is
+    ``r + T/2 r x rho`` (first order of ``dC_w^e/dt = C_w^e [rho x]``), h - T/2 v_D.
+    """
+    c = S_CNE
+    r0, r1, r2 = s[c + 6], s[c + 7], s[c + 8]
+    free = int(cfg[CFG_FRAME]) == FREE
+    if s[S_NK] < 0.5:
+        _wander_terms(s, r0, r1, r2, h, free)  # first cycle: coefficients at the start point
+    px = s[S_MW] * vmx + s[S_MW + 1] * vmy
+    py = s[S_MW + 2] * vmx + s[S_MW + 3] * vmy
+    pz = s[S_RZ]
+    ht = 0.5 * T
+    m0 = r0 + ht * (r1 * pz - r2 * py)
+    m1 = r1 + ht * (r2 * px - r0 * pz)
+    m2 = r2 + ht * (r0 * py - r1 * px)
+    s[S_G] = _wander_terms(s, m0, m1, m2, h - ht * vmz, free)
+    s[S_WIE], s[S_WIE + 1], s[S_WIE + 2] = earth.OMEGA * m0, earth.OMEGA * m1, earth.OMEGA * m2
+    s[S_WEN] = s[S_MW] * vmx + s[S_MW + 1] * vmy
+    s[S_WEN + 1] = s[S_MW + 2] * vmx + s[S_MW + 3] * vmy
+    s[S_WEN + 2] = s[S_RZ]
 
 
 @kernel
@@ -435,7 +546,12 @@ def _position_step(s: np.ndarray, cfg: np.ndarray, T: float, vnx: float, vny: fl
         ey = (-s[S_VP + 1] + 8.0 * voy + 5.0 * vny) / 12.0
         ez = (-s[S_VP + 2] + 8.0 * voz + 5.0 * vnz) / 12.0
     if cfg[CFG_EARTH] > 0.5:
-        xn, xe, xd = ey * s[S_KE] * T, -ex * s[S_KN] * T, -ey * s[S_KT] * T
+        if int(cfg[CFG_FRAME]) == GEOGRAPHIC:
+            xn, xe, xd = ey * s[S_KE] * T, -ex * s[S_KN] * T, -ey * s[S_KT] * T
+        else:
+            xn = (s[S_MW] * ex + s[S_MW + 1] * ey) * T
+            xe = (s[S_MW + 2] * ex + s[S_MW + 3] * ey) * T
+            xd = s[S_RZ] * T
         _put9(s, S_CNE, mat3_mul_s(_get9(s, S_CNE), rotvec_to_dcm_s(xn, xe, xd)))
     else:
         s[S_PF] += ex * T
