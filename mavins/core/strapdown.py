@@ -160,7 +160,7 @@ def make_config(
         raise ValueError(f"imu_rates must be averaged or sampled, got {imu_rates!r}")
     if frame not in FRAMES:
         raise ValueError(f"frame must be one of {', '.join(FRAMES)}, got {frame!r}")
-    if frame in ("free", "inertial"):
+    if frame == "inertial":
         raise ValueError(f"frame {frame!r} is not implemented yet")
     if frame != "geographic" and earth_model != "wgs84":
         raise ValueError(f"frame {frame!r} needs the WGS-84 Earth (earth_model wgs84)")
