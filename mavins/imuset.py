@@ -17,6 +17,7 @@ import numpy as np
 
 from .core.fdi import FdiEvent, ImuSetMonitor
 from .core.records import ImuSample
+from .core.redundancy import ST_ALARM
 from .link.ingest import IMU_MESSAGES, Ingest, IngestConfig
 
 SAME_INSTANT = 1.5e-3  # s: ArduPilot's SCALED_IMU2/3 carry whole milliseconds beside RAW_IMU's microseconds
@@ -31,6 +32,14 @@ def imu_index(msg: object) -> int | None:
     if name in ("HIGHRES_IMU", "RAW_IMU"):
         return int(getattr(msg, "id", 0)) if name == "HIGHRES_IMU" else 0
     return {"SCALED_IMU": 0, "SCALED_IMU2": 1, "SCALED_IMU3": 2}[name]
+
+
+def _warm_up() -> None:
+    """Load (or compile) the monitor's kernel now, not when the first samples wait for it."""
+    from .core.errmodel import ImuSpec
+
+    mon = ImuSetMonitor(2, ImuSpec(gyro_arw=1e-3, accel_vrw=1e-2), 0.01, window=0.02)
+    mon.process(np.array([0.01, 0.02]), np.zeros((2, 2, 3)), np.zeros((2, 2, 3)), np.full(2, 0.01), rates=True)
 
 
 class ImuSet:
@@ -62,6 +71,8 @@ class ImuSet:
         self.last_t: float | None = None
         self.last_reason: str | None = None
         self.primary = Ingest(cfg)  # the pipeline reads the vehicle's system and counts from it
+        _warm_up()
+
 
     def reset_time(self) -> None:
         """Forget the streams' last times and the instant being gathered (autopilot restart)."""
@@ -74,6 +85,25 @@ class ImuSet:
     def take_events(self) -> list[tuple[str, str]]:
         ev, self.events = self.events, []
         return ev
+
+    def status_bits(self) -> tuple[int, int]:
+        """SYS_STATUS sensor bits ``(present, unhealthy)`` of the set: IMU 0 is 3D_GYRO/3D_ACCEL, IMU 1
+        3D_GYRO2/3D_ACCEL2 (MAVLink has no bit for a third IMU). A sensor is unhealthy while isolated;
+        the first IMU's bit also while a detected fault could not be isolated."""
+        from .link.mavlink import mavlink
+
+        bits = {("gyro", 0): mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO, ("accel", 0): mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL,
+                ("gyro", 1): mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO2,
+                ("accel", 1): mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL2}
+        present = sum(b for (_, k), b in bits.items() if k in self.order)
+        bad = 0
+        if self.monitor is not None:
+            for part in (self.monitor.gyro, self.monitor.accel):
+                for row in np.flatnonzero(part.active == 0.0):
+                    bad |= bits.get((part.name, self.order[row // 3]), 0)
+                if part.st[ST_ALARM] > 0.0:
+                    bad |= bits[(part.name, 0)]
+        return present, bad
 
     def sample(self, msg: object) -> ImuSample | None:
         """The fused sample of the instant this message completes (or the previous one, when it

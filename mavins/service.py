@@ -313,6 +313,10 @@ class Service:
         load = min(1000, int(1000 * cpu / wall)) if wall > 0 else 0
         sensors = mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
         healthy = sensors if self.pipeline.engine.state is State.NAVIGATING and not self.pipeline.engine.degraded else 0
+        if self.pipeline.imuset is not None:  # --imus: the second IMU's bits, isolated sensors unhealthy
+            present, bad = self.pipeline.imuset.status_bits()
+            sensors |= present
+            healthy = (healthy | present if healthy else 0) & ~bad
         rejected = sum(self.pipeline.ingest.rejected.values()) + sum(
             v for k, v in self.counters.items() if k.startswith("rejected_"))
         dropped = self._flood_dropped()

@@ -285,4 +285,8 @@ def test_live_pipeline_fuses_the_streamed_imus_and_isolates_a_fault(msg: str) ->
     t_iso = float(fdi[0].split("t=")[1].split(" ")[0])
     assert 20.0 < t_iso <= 21.0
     assert p.imuset is not None and p.imuset.counters["imu_missing"] == 0
+    present, bad = p.imuset.status_bits()  # SYS_STATUS: IMU 1's gyro is the isolated one
+    assert present == (mavlink2.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink2.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+                       | mavlink2.MAV_SYS_STATUS_SENSOR_3D_GYRO2 | mavlink2.MAV_SYS_STATUS_SENSOR_3D_ACCEL2)
+    assert bad == mavlink2.MAV_SYS_STATUS_SENSOR_3D_GYRO2
     assert outs and abs(math.degrees(outs[-1].row[7])) < 1.0  # navigating on the fused data, level
