@@ -158,6 +158,29 @@ def lla_to_ecef(lat: float, lon: float, h: float) -> np.ndarray:
 
 
 @kernel
+def geodetic_from_ecef_s(x: float, y: float, z: float) -> tuple[float, float, float, float]:
+    """``(sin L, cos L, h, R_E)`` of an ECEF point (m), regular at the poles.
+
+    ``sin L`` by fixed-point iteration of ``tan L = (z + e^2 R_E sin L)/rho`` (each step shrinks
+    the error by about e^2, seven steps reach round-off from the ``h = 0`` start), and
+    ``h = rho cos L + z sin L - a sqrt(1 - e^2 sin^2 L)``, which needs no division by cos L
+    (the ECEF/geodetic relation of docs/algorithms.md, solved for h). With ``rho =
+    (R_E + h) cos L`` the outward normal is ``[x/(R_E + h), y/(R_E + h), sin L]``.
+    """
+    rho = np.hypot(x, y)
+    d = np.hypot(rho, z / (1.0 - E2))
+    sl = z / (1.0 - E2) / d if d > 0.0 else 1.0
+    for _ in range(7):
+        r_e = A / np.sqrt(1.0 - E2 * sl * sl)
+        zz = z + E2 * r_e * sl
+        d = np.hypot(rho, zz)
+        sl = zz / d
+    cl = rho / d
+    r_e = A / np.sqrt(1.0 - E2 * sl * sl)
+    return sl, cl, rho * cl + z * sl - r_e * (1.0 - E2 * sl * sl), r_e
+
+
+@kernel
 def ecef_to_lla(p: np.ndarray) -> tuple[float, float, float]:
     """Geodetic latitude, longitude (rad) and height (m) of an ECEF point.
 

@@ -117,7 +117,11 @@ S_KE = 109  # l-cycle 1/(R_E + h) (1/m)
 S_KT = 110  # l-cycle tan L/(R_E + h) (1/m)
 S_MW = 111  # wander/free: l-cycle horizontal transport-rate matrix M (1/m), rho_h^w = M v_h^w, 2x2 row-major
 S_RZ = 115  # wander/free: l-cycle vertical transport rate (rad/s): 0 (wander), Omega sin L (free)
-S_SIZE = 116
+S_RI = 116  # inertial: position r^i in ECI (m); S_V then holds v^i = dr^i/dt, S_C and S_Q C_b^i
+S_GH = 119  # inertial: l-cycle gravitation x, y in ECI (m/s^2); z is S_G
+S_T0 = 121  # inertial: time (s) at which ECI coincides with ECEF
+S_INI = 122  # inertial: 1 once the state is held in ECI
+S_SIZE = 123
 
 OUT_COLUMNS = ("t", "lat", "lon", "h", "vn", "ve", "vd", "roll", "pitch", "yaw", "qw", "qx", "qy", "qz")
 OUT_SIZE = len(OUT_COLUMNS)
@@ -160,8 +164,8 @@ def make_config(
         raise ValueError(f"imu_rates must be averaged or sampled, got {imu_rates!r}")
     if frame not in FRAMES:
         raise ValueError(f"frame must be one of {', '.join(FRAMES)}, got {frame!r}")
-    if frame == "inertial":
-        raise ValueError(f"frame {frame!r} is not implemented yet")
+    if frame == "inertial" and vertical == "hold":
+        raise ValueError("vertical hold needs a local-level frame, not frame inertial")
     if frame != "geographic" and earth_model != "wgs84":
         raise ValueError(f"frame {frame!r} needs the WGS-84 Earth (earth_model wgs84)")
     cfg = np.zeros(CFG_SIZE)
@@ -239,8 +243,12 @@ def _wander_latlon(s: np.ndarray) -> tuple[float, float, float, float]:
 def position(s: np.ndarray, cfg: np.ndarray) -> tuple[float, float, float]:
     """Latitude, longitude (rad) and height (m) of the state."""
     if cfg[CFG_EARTH] > 0.5:
-        if int(cfg[CFG_FRAME]) != GEOGRAPHIC:
-            lat, lon, ca, sa = _wander_latlon(s)
+        frame = int(cfg[CFG_FRAME])
+        if frame == INERTIAL and s[S_INI] > 0.5:
+            lat, lon, h, _x, _y, _z, _r = _inertial_position(s, s[S_T])
+            return lat, lon, h
+        if frame == WANDER or frame == FREE:
+            lat, lon, _ca, _sa = _wander_latlon(s)
             return lat, lon, s[S_H]
         c = S_CNE
         lat, lon = earth.latlon_from_cne_s(s[c + 1], s[c + 4], s[c + 6], s[c + 7], s[c + 8])
@@ -259,6 +267,8 @@ def sync_position(s: np.ndarray, cfg: np.ndarray) -> None:
     lat, lon, h = position(s, cfg)
     s[S_LATC] = lat
     s[S_LONC] = lon
+    if s[S_INI] > 0.5:
+        s[S_H] = h
 
 
 @kernel
@@ -268,7 +278,11 @@ def solution_row(s: np.ndarray, cfg: np.ndarray, out: np.ndarray) -> None:
     Every frame reports NED attitude and velocity: in the wander and free-azimuth frames
     ``v^n = Rz(alpha) v^w`` and ``C_b^n = Rz(alpha) C_b^w`` (docs/algorithms.md).
     """
-    if int(cfg[CFG_FRAME]) != GEOGRAPHIC:
+    frame = int(cfg[CFG_FRAME])
+    if frame == INERTIAL and s[S_INI] > 0.5:
+        _inertial_row(s, out)
+        return
+    if frame == WANDER or frame == FREE:
         _wander_row(s, out)
         return
     out[0] = s[S_T]
@@ -304,6 +318,81 @@ def _wander_row(s: np.ndarray, out: np.ndarray) -> None:
     c = (ca * w0 - sa * w3, ca * w1 - sa * w4, ca * w2 - sa * w5,
          sa * w0 + ca * w3, sa * w1 + ca * w4, sa * w2 + ca * w5, w6, w7, w8)
     _write_ned_row(out, s[S_T], lat, lon, s[S_H], ca * vx - sa * vy, sa * vx + ca * vy, s[S_V + 2], c)
+
+
+@kernel
+def _inertial_position(s: np.ndarray, t: float) -> tuple[float, float, float, float, float, float, float]:
+    """Latitude, longitude (rad), height (m), ECEF position (m) and R_E (m) of the inertial
+    state at time t: ``r^e = Rz(-Omega (t - t0)) r^i`` (ECI = ECEF at t0). At a pole
+    (``x = y = 0`` in e) the longitude is 0."""
+    th = earth.OMEGA * (t - s[S_T0])
+    ct, st = np.cos(th), np.sin(th)
+    x, y, z = s[S_RI], s[S_RI + 1], s[S_RI + 2]
+    xe, ye = ct * x + st * y, ct * y - st * x
+    sl, cl, h, r_e = earth.geodetic_from_ecef_s(xe, ye, z)
+    return np.arctan2(sl, cl), np.arctan2(ye, xe), h, xe, ye, z, r_e
+
+
+@kernel
+def _inertial_row(s: np.ndarray, out: np.ndarray) -> None:
+    """Solution row of the inertial frame: ``v^e = C_i^e v^i - Omega x r^e``, ``v^n = C_e^n v^e``,
+    ``C_b^n = C_e^n C_i^e C_b^i`` ([ZS] 2.1; [ZS1] eq. 1-3-14)."""
+    t = s[S_T]
+    lat, lon, h, xe, ye, _z, _r = _inertial_position(s, t)
+    th = earth.OMEGA * (t - s[S_T0])
+    ct, st = np.cos(th), np.sin(th)
+    vx, vy, vz = s[S_V], s[S_V + 1], s[S_V + 2]
+    vex = ct * vx + st * vy + earth.OMEGA * ye
+    vey = ct * vy - st * vx - earth.OMEGA * xe
+    n0, n1, n2, n3, n4, n5, n6, n7, n8 = earth.cne_from_latlon_s(lat, lon)
+    cie = (ct, st, 0.0, -st, ct, 0.0, 0.0, 0.0, 1.0)
+    cen = (n0, n3, n6, n1, n4, n7, n2, n5, n8)
+    c = mat3_mul_s(mat3_mul_s(cen, cie), _get9(s, S_C))
+    _write_ned_row(out, t, lat, lon, h, n0 * vex + n3 * vey + n6 * vz, n1 * vex + n4 * vey + n7 * vz,
+                   n2 * vex + n5 * vey + n8 * vz, c)
+
+
+@kernel
+def _enter_inertial(s: np.ndarray) -> None:
+    """Turn a fresh NED state into the inertial frame at its time t0 (ECI = ECEF then):
+    ``C_b^i = C_n^e C_b^n``, ``r^i = r^e``, ``v^i = C_n^e v^n + Omega x r^e`` ([ZS1] eq. 1-3-14)."""
+    cne = _get9(s, S_CNE)
+    sl = -cne[8]
+    r_e = earth.radii_sin(sl)[1]
+    h = s[S_H]
+    x, y = -(r_e + h) * cne[2], -(r_e + h) * cne[5]
+    s[S_RI], s[S_RI + 1], s[S_RI + 2] = x, y, (r_e * (1.0 - earth.E2) + h) * sl
+    for o in (S_V, S_VP):
+        a, b, c = s[o], s[o + 1], s[o + 2]
+        s[o] = cne[0] * a + cne[1] * b + cne[2] * c - earth.OMEGA * y
+        s[o + 1] = cne[3] * a + cne[4] * b + cne[5] * c + earth.OMEGA * x
+        s[o + 2] = cne[6] * a + cne[7] * b + cne[8] * c
+    c_bi = mat3_mul_s(cne, _get9(s, S_C))
+    _put9(s, S_C, c_bi)
+    s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3] = dcm_to_quat_s(c_bi)
+    s[S_T0] = s[S_T]
+    s[S_INI] = 1.0
+
+
+@kernel
+def _l_cycle_inertial(s: np.ndarray, T: float, vmx: float, vmy: float, vmz: float) -> None:
+    """The l cycle of the inertial frame ([ZS] 2.1): no Earth or transport rate; gravitation
+    ``G = g + Omega x (Omega x r)`` ([ZS1] eq. 1-3-26, g the contract's normal gravity along the
+    ellipsoid normal) at the extrapolated mid-interval point ``r^i + T/2 v_mid``, turned into ECI."""
+    ht = 0.5 * T
+    th = earth.OMEGA * (s[S_T] + ht - s[S_T0])
+    ct, st = np.cos(th), np.sin(th)
+    x, y, z = s[S_RI] + ht * vmx, s[S_RI + 1] + ht * vmy, s[S_RI + 2] + ht * vmz
+    xe, ye = ct * x + st * y, ct * y - st * x
+    sl, _cl, h, r_e = earth.geodetic_from_ecef_s(xe, ye, z)
+    g = earth.gravity_sin(sl, r_e, h)
+    k = g / (r_e + h) + earth.OMEGA * earth.OMEGA
+    gx, gy = -k * xe, -k * ye
+    for i in range(3):
+        s[S_WIE + i] = 0.0
+        s[S_WEN + i] = 0.0
+    s[S_GH], s[S_GH + 1] = ct * gx - st * gy, st * gx + ct * gy
+    s[S_G] = -g * sl
 
 
 # --- state access for the stateful shells (engine, filter) ------------------
@@ -406,8 +495,12 @@ def _l_cycle(s: np.ndarray, cfg: np.ndarray, T: float, lat: float, h: float, vmx
             s[S_WEN + i] = 0.0
         s[S_G] = s[S_G0]
         return
-    if int(cfg[CFG_FRAME]) != GEOGRAPHIC:
+    frame = int(cfg[CFG_FRAME])
+    if frame == WANDER or frame == FREE:
         _l_cycle_wander(s, cfg, T, h, vmx, vmy, vmz)
+        return
+    if frame == INERTIAL:
+        _l_cycle_inertial(s, T, vmx, vmy, vmz)
         return
     lat_mid = lat + 0.5 * T * vmx * s[S_KN]
     h_mid = h - 0.5 * T * vmz
@@ -545,8 +638,13 @@ def _position_step(s: np.ndarray, cfg: np.ndarray, T: float, vnx: float, vny: fl
         ex = (-s[S_VP] + 8.0 * vox + 5.0 * vnx) / 12.0
         ey = (-s[S_VP + 1] + 8.0 * voy + 5.0 * vny) / 12.0
         ez = (-s[S_VP + 2] + 8.0 * voz + 5.0 * vnz) / 12.0
-    if cfg[CFG_EARTH] > 0.5:
-        if int(cfg[CFG_FRAME]) == GEOGRAPHIC:
+    frame = int(cfg[CFG_FRAME])
+    if frame == INERTIAL:
+        s[S_RI] += ex * T
+        s[S_RI + 1] += ey * T
+        s[S_RI + 2] += ez * T
+    elif cfg[CFG_EARTH] > 0.5:
+        if frame == GEOGRAPHIC:
             xn, xe, xd = ey * s[S_KE] * T, -ex * s[S_KN] * T, -ey * s[S_KT] * T
         else:
             xn = (s[S_MW] * ex + s[S_MW + 1] * ey) * T
@@ -574,6 +672,9 @@ def k_update(s: np.ndarray, cfg: np.ndarray) -> None:
     """
     n = int(s[S_NJ])
     T = s[S_BUFT]
+    inertial = int(cfg[CFG_FRAME]) == INERTIAL
+    if inertial and s[S_INI] < 0.5:
+        _enter_inertial(s)
     sgx, sgy, sgz, vsx, vsy, vsz, scx, scy, scz = _body_increments(s, cfg, n)
     # Mid-interval velocity extrapolated from the last two updates ([TW11] 11.4).
     vmx = 1.5 * s[S_V] - 0.5 * s[S_VP]
@@ -586,14 +687,17 @@ def k_update(s: np.ndarray, cfg: np.ndarray) -> None:
     zy = (s[S_WIE + 1] + s[S_WEN + 1]) * T
     zz = (s[S_WIE + 2] + s[S_WEN + 2]) * T
     vnx, vny, vnz = _velocity_step(s, T, sgx, sgy, sgz, vsx, vsy, vsz, scx, scy, scz, zx, zy, zz, vmx, vmy, vmz)
+    if inertial:
+        vnx += s[S_GH] * T
+        vny += s[S_GH + 1] * T
     if cfg[CFG_VHOLD] > 0.5:
         vnz = s[S_VD0]
     _attitude_step(s, cfg, sgx, sgy, sgz, zx, zy, zz)
+    s[S_T] = s[S_TJ]  # the position step's output (inertial: the Earth's angle) is at the new time
     _position_step(s, cfg, T, vnx, vny, vnz)
     for a in range(3):
         s[S_VP + a] = s[S_V + a]
     s[S_V], s[S_V + 1], s[S_V + 2] = vnx, vny, vnz
-    s[S_T] = s[S_TJ]
     s[S_NK] += 1.0
     s[S_NJ] = 0.0
     s[S_BUFT] = 0.0
