@@ -185,7 +185,7 @@ class ImuSet:
             from .fdi import imu_spec
 
             self.monitor = ImuSetMonitor(len(self.order), imu_spec(self.spec), dt,  # type: ignore[arg-type]
-                                         false_alarm=self.false_alarm)
+                                         false_alarm=self.false_alarm, keep_log=False)
         rows = [self.held[k] for k in self.order]
         w = np.array([[r.gyro for r in rows]])
         f = np.array([[r.accel for r in rows]])

@@ -62,11 +62,13 @@ class ParityMonitor:
     sensor as the 1-sigma of a window-mean rate, rate units).
 
     ``window`` samples per test, ``window_s`` their nominal duration (s); ``false_alarm`` the design
-    probability per test; ``calibration`` and ``holdoff`` in windows.
+    probability per test; ``calibration`` and ``holdoff`` in windows; ``keep_log`` keeps every test's
+    statistic for :meth:`statistics` (off for a long live run).
     """
 
     def __init__(self, H: np.ndarray, sigma: np.ndarray, *, window: int, window_s: float, false_alarm: float,
-                 tau_bias: float = 60.0, calibration: int = 10, holdoff: int = 20, name: str = "gyro") -> None:
+                 tau_bias: float = 60.0, calibration: int = 10, holdoff: int = 20, name: str = "gyro",
+                 keep_log: bool = True) -> None:
         self.H = np.ascontiguousarray(H, dtype=float)
         n = self.H.shape[0]
         self.sigma = np.broadcast_to(np.asarray(sigma, dtype=float), (n,)).copy()
@@ -82,6 +84,7 @@ class ParityMonitor:
         self.alpha = min(1.0, window_s / tau_bias)
         self.calibration = int(calibration)
         self.holdoff = int(holdoff)
+        self.keep_log = keep_log
         self.active = np.ones(n)
         self.st = np.zeros(rd.ST_SIZE)
         self.acc = np.zeros(n)
@@ -153,7 +156,8 @@ class ParityMonitor:
                 self.active[j] = 1.0
                 self._configure()
                 events.append(FdiEvent(te, "recovered", self.name, j, stat, self.threshold))
-        self._logs.append(log[: int(self.st[rd.ST_NLOG])].copy())
+        if self.keep_log and self.st[rd.ST_NLOG] > 0:
+            self._logs.append(log[: int(self.st[rd.ST_NLOG])].copy())
         return fused, events
 
 
@@ -168,7 +172,7 @@ class ImuSetMonitor:
 
     def __init__(self, n_imus: int, spec: ImuSpec, dt: float, *, window: float = 0.5, false_alarm: float = 1e-6,
                  tau_bias: float = 60.0, calibration: float = 5.0, holdoff: float = 10.0,
-                 rotations: list[np.ndarray] | None = None) -> None:
+                 rotations: list[np.ndarray] | None = None, keep_log: bool = True) -> None:
         if n_imus < 2:
             raise ValueError(f"FDI needs two or more IMUs, got {n_imus}")
         if not (dt > 0.0 and math.isfinite(dt)):
@@ -185,7 +189,7 @@ class ImuSetMonitor:
         hold = max(1, round(holdoff / self.window_s))
         self.gyro, self.accel = (
             ParityMonitor(H, s, window=win, window_s=self.window_s, false_alarm=false_alarm, tau_bias=tau_bias,
-                          calibration=n_cal, holdoff=hold, name=name)
+                          calibration=n_cal, holdoff=hold, name=name, keep_log=keep_log)
             for s, name in ((sg, "gyro"), (sa, "accel")))
 
     def process(self, t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray, dt: np.ndarray, *, rates: bool = False
