@@ -315,7 +315,7 @@ def reconfigure(H: np.ndarray, active: np.ndarray, sigma: np.ndarray | float | N
 
 def gdop(H: np.ndarray) -> float:
     """``sqrt(trace((H^T H)^-1))``: the rms error of the fused 3-vector per unit sensor noise
-    (textbook sec. 5.2; Sturza 1988, geometry). ``3/sqrt(N)`` for an optimal set of N sensors."""
+    (textbook sec. 5.2). ``3/sqrt(N)`` for an optimal set of N sensors."""
     H = np.asarray(H, dtype=float)
     return float(np.sqrt(np.trace(np.linalg.inv(H.T @ H))))
 
