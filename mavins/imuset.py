@@ -66,6 +66,7 @@ class ImuSet:
         self.prev_t: float | None = None
         self.monitor: ImuSetMonitor | None = None
         self.events: list[tuple[str, str]] = []
+        self.tests: list[tuple[float, str, float, float, np.ndarray]] = []
         self.fdi: list[FdiEvent] = []
         self.counters: Counter = Counter()
         self.last_t: float | None = None
@@ -85,6 +86,11 @@ class ImuSet:
     def take_events(self) -> list[tuple[str, str]]:
         ev, self.events = self.events, []
         return ev
+
+    def take_tests(self) -> list[tuple[float, str, float, float, np.ndarray]]:
+        """``(t, sensor, statistic, threshold, residuals)`` of every window test since the last call."""
+        tests, self.tests = self.tests, []
+        return tests
 
     def status_bits(self) -> tuple[int, int]:
         """SYS_STATUS sensor bits ``(present, unhealthy)`` of the set: IMU 0 is 3D_GYRO/3D_ACCEL, IMU 1
@@ -190,6 +196,9 @@ class ImuSet:
         w = np.array([[r.gyro for r in rows]])
         f = np.array([[r.accel for r in rows]])
         g, a, events = self.monitor.process(np.array([t]), w, f, np.array([dt]), rates=True)
+        for part in (self.monitor.gyro, self.monitor.accel):
+            for tw, stat, thr in part.recent:
+                self.tests.append((float(tw), part.name, float(stat), float(thr), part.residuals()))
         for i, e in enumerate(events):
             self.fdi.append(e)
             nxt = events[i + 1] if i + 1 < len(events) else None

@@ -111,6 +111,10 @@ class Pipeline:
         self.last_sample = smp
         out = self.engine.on_imu(smp)
         rec = self.recorder
+        if self.imuset is not None:
+            for t, sensor, stat, thr, res in self.imuset.take_tests():
+                if rec is not None:
+                    rec.on_fdi(t, sensor, stat, thr, res)
         if rec is not None:
             rec.on_sample(smp.t, smp.gyro, smp.accel)
             if out is not None:

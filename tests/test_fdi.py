@@ -249,14 +249,16 @@ def test_dodecahedron_gyros_isolate_each_single_failure_and_detect_two() -> None
 
 
 @pytest.mark.parametrize("msg", ["highres", "raw"])
-def test_live_pipeline_fuses_the_streamed_imus_and_isolates_a_fault(msg: str) -> None:
+def test_live_pipeline_fuses_the_streamed_imus_and_isolates_a_fault(msg: str, tmp_path: Path) -> None:
     """mavins run/replay --imus: the simulator streams three IMUs (HIGHRES_IMU ids 0-2, or RAW_IMU with
-    SCALED_IMU2/3), IMU 1's z gyro steps by 0.3 deg/s at 20 s; the pipeline isolates it and says so."""
+    SCALED_IMU2/3), IMU 1's z gyro steps by 0.3 deg/s at 20 s; the pipeline isolates it, says so, and
+    (highres run) records every window test to Rerun."""
     from pymavlink.dialects.v20 import common as mavlink2
 
     from mavins.engine import EngineConfig
     from mavins.link.ingest import IngestConfig
     from mavins.pipeline import Pipeline
+    from mavins.record.recorder import Recorder
     from sim.stream import StreamOptions, frames
 
     base = load("static")
@@ -267,8 +269,10 @@ def test_live_pipeline_fuses_the_streamed_imus_and_isolates_a_fault(msg: str) ->
     init = run.init()
     enc = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
     dec = mavlink2.MAVLink(None)
+    rrd = tmp_path / "fdi.rrd"
+    rec = Recorder(rrd, live=False) if msg == "highres" else None
     p = Pipeline(EngineConfig(lat=init.lat, lon=init.lon, alt=init.h, heading=init.yaw, align=2.0),
-                 IngestConfig(imus=()))
+                 IngestConfig(imus=()), recorder=rec)
     outs, events = [], []
     for _, ms in frames(run, enc, StreamOptions(msg=msg, imus=3)):
         for m in ms:
@@ -290,3 +294,26 @@ def test_live_pipeline_fuses_the_streamed_imus_and_isolates_a_fault(msg: str) ->
                        | mavlink2.MAV_SYS_STATUS_SENSOR_3D_GYRO2 | mavlink2.MAV_SYS_STATUS_SENSOR_3D_ACCEL2)
     assert bad == mavlink2.MAV_SYS_STATUS_SENSOR_3D_GYRO2
     assert outs and abs(math.degrees(outs[-1].row[7])) < 1.0  # navigating on the fused data, level
+    if rec is None:
+        return
+    rec.close()
+    from rerun.chunk import RrdReader
+
+    series: dict[str, list[list[float]]] = {}
+    for ch in RrdReader(str(rrd)).stream():
+        batch = ch.to_record_batch()
+        for name in batch.schema.names:
+            if name.endswith("Scalars:scalars") and ch.entity_path.startswith("/fdi/gyro"):
+                series.setdefault(ch.entity_path, []).extend(v for v in batch.column(name).to_pylist() if v)
+    test = np.array(series["/fdi/gyro/test"])
+    res = np.array(series["/fdi/gyro/residuals"])
+    # one test per 0.5 s window from the end of discovery (1 s) and calibration (5 s) to 30 s
+    assert 44 <= test.shape[0] <= 48 and res.shape == (test.shape[0], 9)
+    over = np.flatnonzero(test[:, 0] > test[:, 1])
+    assert over.size == 1  # the isolating window; IMU 1 is dropped after it
+    # one threshold while three IMUs are tested (6 degrees of freedom), a lower one with two (3): the
+    # chi-square quantile at a fixed P grows with the degrees of freedom
+    np.testing.assert_allclose(test[: over[0] + 1, 1], test[0, 1])
+    assert test[-1, 1] < test[0, 1]
+    # the failing window's largest residual is IMU 1's z gyro (row 5), its residual 0 once dropped
+    assert int(np.argmax(np.abs(res[over[0]]))) == 5 and res[-1, 5] == 0.0

@@ -93,7 +93,9 @@ class ParityMonitor:
         self.p = np.zeros(max(n - 3, 1))
         self.thr1 = rd.chi2_quantile(self.false_alarm, 1, upper=True)
         self._logs: list[np.ndarray] = []
+        self.recent = np.empty((0, 3))  # (t, statistic, threshold) of the tests of the last process() call
         self._configure()
+        self._res = np.zeros(n)
 
     def _configure(self) -> None:
         act = self.active > 0.0
@@ -113,6 +115,17 @@ class ParityMonitor:
         """Whether a fault in the present configuration could be isolated (some column isolable)."""
         return bool(self.dof > 0 and rd.isolable(self.V).any())
 
+    def residuals(self) -> np.ndarray:
+        """Each sensor's parity residual of the last test, ``v_j^T p / |v_j|`` (sensor-noise units,
+        0 for a sensor dropped before it): the signed square root of its isolation score."""
+        return self._res
+
+    def _residuals_now(self) -> np.ndarray:
+        p = self.p[: self.dof]
+        norms = np.sqrt(np.sum(self.V * self.V, axis=0))
+        proj = p @ self.V if self.dof else np.zeros(self.V.shape[1])
+        return np.where(norms > 0.0, proj / np.where(norms > 0.0, norms, 1.0), 0.0)
+
     def statistics(self) -> np.ndarray:
         """``(t, statistic, threshold)`` of every test so far, (K, 3)."""
         return np.concatenate(self._logs) if self._logs else np.empty((0, 3))
@@ -129,11 +142,15 @@ class ParityMonitor:
         events: list[FdiEvent] = []
         i = 0
         self.st[rd.ST_NLOG] = 0.0
+        tested = 0.0
         while True:
             i, code, j = rd.monitor_run(m, dt, t, i, self.window, self.st, self.acc, self.b, self.H, self.G,
                                         self.V, self.active, self.threshold, self.thr1, self.excl_sigma,
                                         self.excl_count, self.alpha, self.calibration, self.holdoff, self.p,
                                         fused, log, rates)
+            if self.st[rd.ST_NLOG] > tested:  # a new test: its residuals with its own configuration
+                tested = self.st[rd.ST_NLOG]
+                self._res = self._residuals_now()
             if code == rd.RUN_DONE:
                 break
             nl = int(self.st[rd.ST_NLOG])
@@ -156,8 +173,9 @@ class ParityMonitor:
                 self.active[j] = 1.0
                 self._configure()
                 events.append(FdiEvent(te, "recovered", self.name, j, stat, self.threshold))
-        if self.keep_log and self.st[rd.ST_NLOG] > 0:
-            self._logs.append(log[: int(self.st[rd.ST_NLOG])].copy())
+        self.recent = log[: int(self.st[rd.ST_NLOG])].copy()
+        if self.keep_log and self.recent.shape[0]:
+            self._logs.append(self.recent)
         return fused, events
 
 

@@ -15,6 +15,8 @@ Layout (entity paths, units in the series names):
   (ms, live runs), ``/health/counts/*`` (rejected samples by reason, bridged
   and long gaps, restarts); ``/log`` text log of state changes, alignment
   result and warnings.
+* ``/fdi/gyro`` and ``/fdi/accel`` with ``--imus``: ``test`` (statistic,
+  threshold) and ``residuals`` (each sensor's parity residual) per window.
 
 Timelines: ``sensor_time`` (duration) everywhere; ``wall_time`` on live runs.
 Rows are buffered and sent with ``send_columns`` (columnar) every
@@ -103,6 +105,7 @@ def blueprint():  # type: ignore[no-untyped-def]
                 series("/health/output_rate", "Output rate (Hz)"),
                 series("/health/latency", "Processing latency (ms)"),
                 series("/health/counts", "Counts: rejected, gaps, restarts"),
+                series("/fdi", "FDI (--imus): statistic, threshold", contents=["+ /fdi/gyro/test", "+ /fdi/accel/test"]),
             ),
             column_shares=[4, 3, 2],
         ),
@@ -292,6 +295,12 @@ class Recorder:
         if len(self._gnss) % 10 == 1:
             self.rec.set_time("sensor_time", duration=t)
             self.rec.log("/world/gnss", self.rr.Points3D(self._gnss, colors=[[255, 60, 200]], radii=0.4))
+
+    def on_fdi(self, t: float, sensor: str, statistic: float, threshold: float, residuals: np.ndarray) -> None:
+        """One FDI window test of ``--imus`` (docs/redundancy.md): statistic and threshold, and each
+        sensor's parity residual (sensor-noise units; IMU-major, x y z per IMU)."""
+        self._push(f"/fdi/{sensor}/test", t, [statistic, threshold])
+        self._push(f"/fdi/{sensor}/residuals", t, [float(r) for r in residuals])
 
     def on_counters(self, t: float, counters: dict[str, int]) -> None:
         """Counts so far: rejected samples by reason, bridged and long gaps, restarts (one entity each)."""

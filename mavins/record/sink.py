@@ -22,6 +22,7 @@ class Sink(Protocol):
     def on_latency(self, t: float, ms: float) -> None: ...
     def on_filter(self, t: float, unc: object) -> None: ...
     def on_gnss(self, t: float, ned: np.ndarray) -> None: ...
+    def on_fdi(self, t: float, sensor: str, statistic: float, threshold: float, residuals: np.ndarray) -> None: ...
     def close(self) -> None: ...
 
 
@@ -65,6 +66,9 @@ class GuardedSink:
 
     def on_gnss(self, t: float, ned: np.ndarray) -> None:
         self._call("on_gnss", t, ned)
+
+    def on_fdi(self, t: float, sensor: str, statistic: float, threshold: float, residuals: np.ndarray) -> None:
+        self._call("on_fdi", t, sensor, statistic, threshold, residuals)
 
     def close(self) -> None:
         self._call("close")
