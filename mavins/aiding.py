@@ -216,7 +216,8 @@ class LiveFilter:
                 model: tuple[np.ndarray, np.ndarray, np.ndarray]) -> bool:
         """Apply one measurement model (nu, H, R) with the gate, count it, keep its test ratio."""
         nu, H, R = model
-        _, ratio, ok = kalman.apply_update(s, cfg, self.bias, self.P, H, nu, R, self.settings.gate)
+        free = kalman.MAG_FREE if kind == "mag" else kalman.ALL
+        _, ratio, ok = kalman.apply_update(s, cfg, self.bias, self.P, H, nu, R, self.settings.gate, free)
         self.counters[f"{kind}_{'accepted' if ok else 'rejected'}"] += 1
         for key in ratio_keys:
             self.ratios[key] = ratio * ratio

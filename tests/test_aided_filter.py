@@ -509,7 +509,7 @@ def test_joseph_update_equals_the_textbook_update() -> None:
     K = P @ H.T @ np.linalg.inv(S)
     x = np.zeros(em.NX)
     p = P.copy()
-    nis, ratio, ok = kf.update(x, p, H, nu, R, 5.0)
+    nis, ratio, ok = kf.update(x, p, H, nu, R, 5.0, kf.ALL)
     assert ok
     np.testing.assert_allclose(x, K @ nu, rtol=1e-10, atol=1e-12)
     np.testing.assert_allclose(p, (np.eye(em.NX) - K @ H) @ P, rtol=1e-9, atol=1e-9)
@@ -519,9 +519,9 @@ def test_joseph_update_equals_the_textbook_update() -> None:
     big[1] = 5.01 * math.sqrt(S[1, 1])
     x = np.zeros(em.NX)
     p = P.copy()
-    nis, ratio, ok = kf.update(x, p, H, big, R, 5.0)
+    nis, ratio, ok = kf.update(x, p, H, big, R, 5.0, kf.ALL)
     assert not ok and ratio > 1.0 and np.all(x == 0.0) and np.array_equal(p, P)
-    nis, ratio, ok = kf.update(x, p, H, big, R, 0.0)  # gate off
+    nis, ratio, ok = kf.update(x, p, H, big, R, 0.0, kf.ALL)  # gate off
     assert ok
 
 

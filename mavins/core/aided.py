@@ -304,19 +304,19 @@ def run_aided(
             late = tk - row[0]
             if np.isfinite(row[1]) and np.isfinite(row[2]) and np.isfinite(row[3]):
                 nu, H, R = kf.gnss_position(s, cfg, row[1], row[2], row[3], lever, late, row[7], row[8])
-                nis, ratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate)
+                nis, ratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate, kf.ALL)
                 n_log = _record(log, n_log, counts, row[0], K_GNSS_POS, nu.shape[0], nis, ratio, ok)
             if np.isfinite(row[4]) and np.isfinite(row[5]) and np.isfinite(row[6]):
                 v_m[0], v_m[1], v_m[2] = row[4], row[5], row[6]
                 nu, H, R = kf.gnss_velocity(s, v_m, w_ib, lever, late, T, row[9])
-                nis, ratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate)
+                nis, ratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate, kf.ALL)
                 n_log = _record(log, n_log, counts, row[0], K_GNSS_VEL, nu.shape[0], nis, ratio, ok)
             ig += 1
         while ib < baro.shape[0] and baro[ib, 0] <= tk:
             _propagate(s, cfg, spec, P, acc)
             if np.isfinite(baro[ib, 1]):
                 nu, H, R = kf.baro_height(s, bias, baro[ib, 1], tk - baro[ib, 0], baro[ib, 2])
-                nis, ratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate)
+                nis, ratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate, kf.ALL)
                 n_log = _record(log, n_log, counts, baro[ib, 0], K_BARO, 1, nis, ratio, ok)
             ib += 1
         while im < mag.shape[0] and mag[im, 0] <= tk:
@@ -324,14 +324,14 @@ def run_aided(
             m_b[0], m_b[1], m_b[2] = mag[im, 1], mag[im, 2], mag[im, 3]
             if np.isfinite(m_b[0]) and np.isfinite(m_b[1]) and np.isfinite(m_b[2]):
                 nu, H, R = kf.mag_heading(s, m_b, declination, mag[im, 4])
-                nis, ratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate)
+                nis, ratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate, kf.MAG_FREE)
                 n_log = _record(log, n_log, counts, mag[im, 0], K_MAG, 1, nis, ratio, ok)
             im += 1
         while iz < static.shape[0] and static[iz, 0] <= tk:
             if tk <= static[iz, 1]:
                 _propagate(s, cfg, spec, P, acc)
                 nu, H, R = kf.zupt(s, static[iz, 2])
-                nis, ratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate)
+                nis, ratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate, kf.ALL)
                 n_log = _record(log, n_log, counts, tk, K_ZUPT, nu.shape[0], nis, ratio, ok)
             if tk < static[iz, 1]:
                 break
@@ -348,7 +348,7 @@ def run_aided(
                     walk += 2.0 * spec[em.SP_GYRO_GM] ** 2 / spec[em.SP_GYRO_TAU]
                 for a in range(3):
                     R[a, a] += walk * raw_t / 3.0
-                nis, ratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate)
+                nis, ratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate, kf.ALL)
                 n_log = _record(log, n_log, counts, tk, K_ZARU, nu.shape[0], nis, ratio, ok)
             for a in range(3):
                 raw_sum[a] = 0.0
