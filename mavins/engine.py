@@ -112,6 +112,9 @@ class Engine:
         # one declination for the alignment and the filter's magnetometer updates
         self.filter = LiveFilter(dataclasses.replace(self.cfg.filter, declination=self.cfg.declination))
         self._kcfg = sd.make_config(**strapdown_of(self.cfg).keywords())
+        if self.cfg.frame != "geographic" and self.cfg.filter.aiding:
+            raise ValueError(f"--frame {self.cfg.frame} navigates free inertial only (the filter works in the "
+                             "geographic frame): add --aiding none")
         if None not in (self.cfg.lat, self.cfg.lon, self.cfg.alt):
             self.set_position(float(self.cfg.lat), float(self.cfg.lon), float(self.cfg.alt), "options")  # type: ignore[arg-type]
         else:
@@ -267,6 +270,10 @@ class Engine:
         self._gyro_last = (smp.gyro[0] - bg[0], smp.gyro[1] - bg[1], smp.gyro[2] - bg[2])
         self._aid_from_sample(smp)
         t = sd.state_time(s)  # type: ignore[arg-type]
+        if not self.degraded and sd.frame_limit(s) is not None:  # type: ignore[arg-type]
+            self.degraded = True
+            self._event("WARNING", f"geographic frame beyond |lat| {math.degrees(sd.GEO_LAT_LIMIT):g} deg: solution "
+                                   "degraded (use --frame wander, free or inertial)")
         flt.tick(t)
         self.events.extend(flt.events)
         flt.events.clear()

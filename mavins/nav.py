@@ -83,6 +83,13 @@ def run_nav(imu_path: Path, init_path: Path, out_path: Path, opts: NavOptions) -
                     t_write += t0 - t2
                 t_read += time.perf_counter() - t0
                 t0 = time.perf_counter()
+                t_limit = sd.frame_limit(state)
+                if t_limit is not None:
+                    raise files.DataFileError(
+                        f"{imu_path}: the geographic frame cannot navigate beyond |lat| "
+                        f"{np.degrees(sd.GEO_LAT_LIMIT):g} deg (reached at t = {t_limit:.6g} s); "
+                        "use --frame wander, free or inertial"
+                    )
         except OSError as exc:  # the reader turns its own errors into DataFileError: this is the output
             raise files.DataFileError(f"{out_path}: cannot write: {exc.strerror or exc}") from None
     t_write += time.perf_counter() - t0  # flush and rename
@@ -142,6 +149,9 @@ def run_nav_aided(imu_path: Path, init_path: Path, out_path: Path, opts: NavOpti
 
     from .core import aided
 
+    if opts.strapdown.frame != "geographic":
+        raise ValueError(f"--frame {opts.strapdown.frame}: the filter (--gnss, --baro) works in the geographic "
+                         "frame only")
     files.check_outputs({"-o": out_path}, {"IMU": imu_path, "--init": init_path, "--gnss": gnss_path,
                                           "--baro": baro_path})
     init = files.read_init(init_path)

@@ -15,7 +15,8 @@ import numpy as np
 
 from mavins import files
 
-from . import errors, faults
+from . import errors, faults, polar
+from .polar import EarthFixedMotion
 from .scenarios import Scenario, apply_turntable, build
 from .trajectory import SimResult, simulate
 
@@ -76,7 +77,10 @@ def generate(
     if length < dur:
         traj.static(dur - length)
     apply_turntable(scenario, traj, traj.t0 + dur)
-    exact = simulate(traj, hz, dur, usec_grid=usec_grid)
+    if isinstance(traj, EarthFixedMotion):
+        exact = polar.simulate(traj, hz, dur, usec_grid=usec_grid)
+    else:
+        exact = simulate(traj, hz, dur, usec_grid=usec_grid)
     g = grade if grade is not None else scenario.grade
     model = errors.grade(g)
     t, dth, dv, kept = errors.apply(model, exact.t, exact.dtheta, exact.dv, seed, t_start=exact.t0)

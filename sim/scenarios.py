@@ -16,6 +16,7 @@ from typing import Any
 
 from . import SCENARIO_DIR as BUILTIN_DIR
 from . import faults
+from .polar import EarthFixedMotion
 from .trajectory import Trajectory
 
 
@@ -110,6 +111,7 @@ _TURNTABLES = {
     "continuous": ({"rate"}, set()),
     "stop_and_go": ({"positions", "rate", "dwell"}, {"alternate"}),
 }
+_EARTH_FIXED_KEYS = {"kind", "roll", "roll_period", "pitch", "pitch_period"}
 _FAILURES = (KeyError, TypeError, ValueError, ZeroDivisionError, AttributeError, IndexError)
 
 
@@ -139,13 +141,16 @@ def _tables(s: Scenario, name: str, kinds: Collection[str]) -> Iterator[tuple[st
         yield where, kind, table
 
 
-def build(s: Scenario) -> Trajectory:
+def build(s: Scenario) -> Trajectory | EarthFixedMotion:
     """Build the trajectory a scenario describes (raises ScenarioError on bad keys or values)."""
     src = s.source
     _keys(src, "[imu]", s.doc.get("imu", {}), set(), _IMU_KEYS)
-    unknown_top = set(s.doc) - {"description", "start", "imu", "segments", "perturbations", "turntable", "faults"}
+    unknown_top = set(s.doc) - {"description", "start", "imu", "segments", "perturbations", "turntable", "faults",
+                                "earth_fixed"}
     if unknown_top:
         raise ScenarioError(f"{src}: unknown top-level key(s) {', '.join(sorted(unknown_top))}")
+    if "earth_fixed" in s.doc:
+        return _build_earth_fixed(s)
     try:
         faults.parse(s.doc, src)
     except ValueError as exc:
@@ -195,6 +200,30 @@ def build(s: Scenario) -> Trajectory:
             raise ScenarioError(f"{src}: {where}: {exc}") from None
     _check_turntable(s)
     return traj
+
+
+def _build_earth_fixed(s: Scenario) -> EarthFixedMotion:
+    """``[earth_fixed]``: a great circle or circle of latitude over or near a pole (sim/polar.py).
+
+    ``[start]`` gives lat, lon, h, yaw (the course) and speed; ``[earth_fixed]`` the kind
+    (great_circle or parallel) and the rocking (roll, pitch amplitudes in deg, periods in s).
+    Segments, perturbations, a turntable and faults do not apply to it.
+    """
+    src = s.source
+    for key in ("segments", "perturbations", "turntable", "faults"):
+        if key in s.doc:
+            raise ScenarioError(f"{src}: {key}: not available with [earth_fixed]")
+    if s.earth != "wgs84":
+        raise ScenarioError(f"{src}: [imu]: [earth_fixed] needs earth = wgs84")
+    start = _keys(src, "[start]", s.doc.get("start"), {"lat", "lon", "h", "speed"}, {"yaw"})
+    ef = _keys(src, "[earth_fixed]", s.doc["earth_fixed"], {"kind"}, _EARTH_FIXED_KEYS - {"kind"})
+    try:
+        m = EarthFixedMotion(str(ef["kind"]), float(start["lat"]), float(start["lon"]), float(start["h"]),
+                             float(start.get("yaw", 0.0)), float(start["speed"]),
+                             **{k: float(v) for k, v in ef.items() if k != "kind"})
+    except _FAILURES as exc:
+        raise ScenarioError(f"{src}: [earth_fixed]: {exc}") from None
+    return m
 
 
 def _check_turntable(s: Scenario) -> None:

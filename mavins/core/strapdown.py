@@ -121,7 +121,14 @@ S_RI = 116  # inertial: position r^i in ECI (m); S_V then holds v^i = dr^i/dt, S
 S_GH = 119  # inertial: l-cycle gravitation x, y in ECI (m/s^2); z is S_G
 S_T0 = 121  # inertial: time (s) at which ECI coincides with ECEF
 S_INI = 122  # inertial: 1 once the state is held in ECI
-S_SIZE = 123
+S_FLAG = 123  # 1 once the geographic frame was asked to navigate beyond GEO_LAT_LIMIT
+S_FLAGT = 124  # time (s) of the update that first went beyond it
+S_SIZE = 125
+
+# The geographic frame's transport rate has -v_E tan L/(R_E + h) in its vertical component:
+# beyond this latitude (55 km from a pole) it is clamped there and the state flagged, since
+# its errors grow like 1/distance^2 from the pole (docs/algorithms.md, "Near the poles").
+GEO_LAT_LIMIT = float(np.radians(89.5))
 
 OUT_COLUMNS = ("t", "lat", "lon", "h", "vn", "ve", "vd", "roll", "pitch", "yaw", "qw", "qx", "qy", "qz")
 OUT_SIZE = len(OUT_COLUMNS)
@@ -164,8 +171,6 @@ def make_config(
         raise ValueError(f"imu_rates must be averaged or sampled, got {imu_rates!r}")
     if frame not in FRAMES:
         raise ValueError(f"frame must be one of {', '.join(FRAMES)}, got {frame!r}")
-    if frame == "inertial" and vertical == "hold":
-        raise ValueError("vertical hold needs a local-level frame, not frame inertial")
     if frame != "geographic" and earth_model != "wgs84":
         raise ValueError(f"frame {frame!r} needs the WGS-84 Earth (earth_model wgs84)")
     cfg = np.zeros(CFG_SIZE)
@@ -375,6 +380,24 @@ def _enter_inertial(s: np.ndarray) -> None:
 
 
 @kernel
+def _inertial_hold(s: np.ndarray, cfg: np.ndarray, vx: float, vy: float, vz: float) -> tuple[float, float, float]:
+    """``--vertical hold`` in the inertial frame: move r^i along the ellipsoid normal back to the
+    initial height and set the velocity's component along it (relative to the Earth, ``v^i -
+    Omega x r^i``) to the initial ``-v_D``; returns the new v^i (m/s)."""
+    th = earth.OMEGA * (s[S_T] - s[S_T0])
+    ct, st = np.cos(th), np.sin(th)
+    x, y, z = s[S_RI], s[S_RI + 1], s[S_RI + 2]
+    sl, _cl, h, r_e = earth.geodetic_from_ecef_s(ct * x + st * y, ct * y - st * x, z)
+    k = 1.0 / (r_e + h)
+    nx, ny, nz = x * k, y * k, sl  # the normal turned into ECI: the same x/(R_E + h) form
+    dh = s[S_H0] - h
+    s[S_RI], s[S_RI + 1], s[S_RI + 2] = x + dh * nx, y + dh * ny, z + dh * nz
+    dv = -s[S_VD0] - (nx * (vx + earth.OMEGA * y) + ny * (vy - earth.OMEGA * x) + nz * vz)
+    sync_position(s, cfg)
+    return vx + dv * nx, vy + dv * ny, vz + dv * nz
+
+
+@kernel
 def _l_cycle_inertial(s: np.ndarray, T: float, vmx: float, vmy: float, vmz: float) -> None:
     """The l cycle of the inertial frame ([ZS] 2.1): no Earth or transport rate; gravitation
     ``G = g + Omega x (Omega x r)`` ([ZS1] eq. 1-3-26, g the contract's normal gravity along the
@@ -399,6 +422,14 @@ def _l_cycle_inertial(s: np.ndarray, T: float, vmx: float, vmy: float, vmz: floa
 def state_time(s: np.ndarray) -> float:
     """Time (s) of the state's last k update."""
     return float(s[S_T])
+
+
+def frame_limit(s: np.ndarray) -> float | None:
+    """Time (s) at which the geographic frame first went beyond GEO_LAT_LIMIT, or None.
+
+    From then on its solution is not trustworthy (finite, but the transport rate is clamped).
+    """
+    return float(s[S_FLAGT]) if s[S_FLAG] > 0.5 else None
 
 
 def skip_to(s: np.ndarray, t: float) -> None:
@@ -503,6 +534,11 @@ def _l_cycle(s: np.ndarray, cfg: np.ndarray, T: float, lat: float, h: float, vmx
         _l_cycle_inertial(s, T, vmx, vmy, vmz)
         return
     lat_mid = lat + 0.5 * T * vmx * s[S_KN]
+    if abs(lat_mid) > GEO_LAT_LIMIT:
+        if s[S_FLAG] < 0.5:
+            s[S_FLAG] = 1.0
+            s[S_FLAGT] = s[S_T]
+        lat_mid = GEO_LAT_LIMIT if lat_mid > 0.0 else -GEO_LAT_LIMIT
     h_mid = h - 0.5 * T * vmz
     kn, ke, kt, wn, wd, g = earth.nav_terms(lat_mid, h_mid)
     s[S_KN], s[S_KE], s[S_KT] = kn, ke, kt
@@ -690,11 +726,13 @@ def k_update(s: np.ndarray, cfg: np.ndarray) -> None:
     if inertial:
         vnx += s[S_GH] * T
         vny += s[S_GH + 1] * T
-    if cfg[CFG_VHOLD] > 0.5:
+    elif cfg[CFG_VHOLD] > 0.5:
         vnz = s[S_VD0]
     _attitude_step(s, cfg, sgx, sgy, sgz, zx, zy, zz)
     s[S_T] = s[S_TJ]  # the position step's output (inertial: the Earth's angle) is at the new time
     _position_step(s, cfg, T, vnx, vny, vnz)
+    if inertial and cfg[CFG_VHOLD] > 0.5:
+        vnx, vny, vnz = _inertial_hold(s, cfg, vnx, vny, vnz)
     for a in range(3):
         s[S_VP + a] = s[S_V + a]
     s[S_V], s[S_V + 1], s[S_V + 2] = vnx, vny, vnz
