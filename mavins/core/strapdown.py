@@ -32,6 +32,7 @@ rectangular, trapezoidal or one-step Simpson (parabolic) rule.
 from __future__ import annotations
 
 import numpy as np
+from numba import literally
 
 from . import earth
 from .coning import (
@@ -247,12 +248,24 @@ def _wander_latlon(s: np.ndarray) -> tuple[float, float, float, float]:
 @kernel
 def position(s: np.ndarray, cfg: np.ndarray) -> tuple[float, float, float]:
     """Latitude, longitude (rad) and height (m) of the state."""
+    frame = int(cfg[CFG_FRAME])
+    if frame == GEOGRAPHIC:
+        return _position(s, cfg, GEOGRAPHIC)
+    if frame == INERTIAL:
+        return _position(s, cfg, INERTIAL)
+    return _position(s, cfg, WANDER)
+
+
+@kernel
+def _position(s: np.ndarray, cfg: np.ndarray, frame: int) -> tuple[float, float, float]:
+    """:func:`position` compiled for one frame (``frame`` is a compile-time constant, so each
+    frame's kernel holds only its own branch; FREE shares WANDER's)."""
+    literally(frame)
     if cfg[CFG_EARTH] > 0.5:
-        frame = int(cfg[CFG_FRAME])
         if frame == INERTIAL and s[S_INI] > 0.5:
             lat, lon, h, _x, _y, _z, _r = _inertial_position(s, s[S_T])
             return lat, lon, h
-        if frame == WANDER or frame == FREE:
+        if frame == WANDER:
             lat, lon, _ca, _sa = _wander_latlon(s)
             return lat, lon, s[S_H]
         c = S_CNE
@@ -269,10 +282,23 @@ def position(s: np.ndarray, cfg: np.ndarray) -> tuple[float, float, float]:
 @kernel
 def sync_position(s: np.ndarray, cfg: np.ndarray) -> None:
     """Refresh the latitude/longitude kept beside C_n^e; call after writing C_n^e or h directly."""
-    lat, lon, h = position(s, cfg)
+    frame = int(cfg[CFG_FRAME])
+    if frame == GEOGRAPHIC:
+        _sync(s, cfg, GEOGRAPHIC)
+    elif frame == INERTIAL:
+        _sync(s, cfg, INERTIAL)
+    else:
+        _sync(s, cfg, WANDER)
+
+
+@kernel
+def _sync(s: np.ndarray, cfg: np.ndarray, frame: int) -> None:
+    """:func:`sync_position` compiled for one frame (see :func:`_position`)."""
+    literally(frame)
+    lat, lon, h = _position(s, cfg, frame)
     s[S_LATC] = lat
     s[S_LONC] = lon
-    if s[S_INI] > 0.5:
+    if frame == INERTIAL and s[S_INI] > 0.5:
         s[S_H] = h
 
 
@@ -284,10 +310,22 @@ def solution_row(s: np.ndarray, cfg: np.ndarray, out: np.ndarray) -> None:
     ``v^n = Rz(alpha) v^w`` and ``C_b^n = Rz(alpha) C_b^w`` (docs/algorithms.md).
     """
     frame = int(cfg[CFG_FRAME])
+    if frame == GEOGRAPHIC:
+        _solution_row(s, cfg, out, GEOGRAPHIC)
+    elif frame == INERTIAL:
+        _solution_row(s, cfg, out, INERTIAL)
+    else:
+        _solution_row(s, cfg, out, WANDER)
+
+
+@kernel
+def _solution_row(s: np.ndarray, cfg: np.ndarray, out: np.ndarray, frame: int) -> None:
+    """:func:`solution_row` compiled for one frame (see :func:`_position`)."""
+    literally(frame)
     if frame == INERTIAL and s[S_INI] > 0.5:
         _inertial_row(s, out)
         return
-    if frame == WANDER or frame == FREE:
+    if frame == WANDER:
         _wander_row(s, out)
         return
     out[0] = s[S_T]
@@ -515,19 +553,19 @@ def _body_increments(s: np.ndarray, cfg: np.ndarray, n: int) -> tuple[float, flo
 
 
 @kernel
-def _l_cycle(s: np.ndarray, cfg: np.ndarray, T: float, lat: float, h: float, vmx: float, vmy: float,
+def _l_cycle(s: np.ndarray, cfg: np.ndarray, frame: int, T: float, lat: float, h: float, vmx: float, vmy: float,
              vmz: float) -> None:
     """Slow terms at the extrapolated mid-interval point (l cycle): Earth rate, transport
     rate (and its radius coefficients, which the position step reuses) and gravity
     ([TW11] 11.4, "evaluated at the l rate"); lat (rad), h (m) at the start of the interval."""
+    literally(frame)
     if cfg[CFG_EARTH] < 0.5:
         for i in range(3):
             s[S_WIE + i] = 0.0
             s[S_WEN + i] = 0.0
         s[S_G] = s[S_G0]
         return
-    frame = int(cfg[CFG_FRAME])
-    if frame == WANDER or frame == FREE:
+    if frame == WANDER:
         _l_cycle_wander(s, cfg, T, h, vmx, vmy, vmz)
         return
     if frame == INERTIAL:
@@ -654,12 +692,14 @@ def _attitude_step(s: np.ndarray, cfg: np.ndarray, sgx: float, sgy: float, sgz: 
 
 
 @kernel
-def _position_step(s: np.ndarray, cfg: np.ndarray, T: float, vnx: float, vny: float, vnz: float) -> None:
+def _position_step(s: np.ndarray, cfg: np.ndarray, frame: int, T: float, vnx: float, vny: float,
+                   vnz: float) -> None:
     """Step 4, position: ``C_n^e(k) = C_n^e(k-1) exp([xi x])``, ``xi = w_en^n(v_eff) T``,
     ``h(k) = h(k-1) - v_D,eff T`` with v_eff from the rectangular, trapezoidal or one-step
     Simpson (parabolic) rule ([TW11] 11.4). The transport rate's radius coefficients are
     those of the l cycle at the mid-interval point (1e-12 relative from the
     effective-velocity midpoint at 100 Hz, below double precision in xi)."""
+    literally(frame)
     vox, voy, voz = s[S_V], s[S_V + 1], s[S_V + 2]
     rule = int(cfg[CFG_POSINT])
     if rule == 0:
@@ -674,7 +714,6 @@ def _position_step(s: np.ndarray, cfg: np.ndarray, T: float, vnx: float, vny: fl
         ex = (-s[S_VP] + 8.0 * vox + 5.0 * vnx) / 12.0
         ey = (-s[S_VP + 1] + 8.0 * voy + 5.0 * vny) / 12.0
         ez = (-s[S_VP + 2] + 8.0 * voz + 5.0 * vnz) / 12.0
-    frame = int(cfg[CFG_FRAME])
     if frame == INERTIAL:
         s[S_RI] += ex * T
         s[S_RI + 1] += ey * T
@@ -696,7 +735,7 @@ def _position_step(s: np.ndarray, cfg: np.ndarray, T: float, vnx: float, vny: fl
         s[S_PF + 2] = 0.0
     else:
         s[S_H] -= ez * T
-    sync_position(s, cfg)
+    _sync(s, cfg, frame)
 
 
 @kernel
@@ -704,11 +743,25 @@ def k_update(s: np.ndarray, cfg: np.ndarray) -> None:
     """One attitude/velocity/position update over the buffered samples (k cycle).
 
     Increments, l-cycle terms, velocity, attitude, position, in that order; all
-    on scalars, so the update allocates nothing.
+    on scalars, so the update allocates nothing. Compiled once per frame (the frame is a
+    compile-time constant of :func:`_k_cycle`), so each frame runs only its own branches.
     """
+    frame = int(cfg[CFG_FRAME])
+    if frame == GEOGRAPHIC:
+        _k_cycle(s, cfg, GEOGRAPHIC)
+    elif frame == INERTIAL:
+        _k_cycle(s, cfg, INERTIAL)
+    else:
+        _k_cycle(s, cfg, WANDER)
+
+
+@kernel
+def _k_cycle(s: np.ndarray, cfg: np.ndarray, frame: int) -> None:
+    """The k cycle of :func:`k_update` for one frame (GEOGRAPHIC, WANDER, which also runs FREE, or INERTIAL)."""
+    literally(frame)
     n = int(s[S_NJ])
     T = s[S_BUFT]
-    inertial = int(cfg[CFG_FRAME]) == INERTIAL
+    inertial = frame == INERTIAL
     if inertial and s[S_INI] < 0.5:
         _enter_inertial(s)
     sgx, sgy, sgz, vsx, vsy, vsz, scx, scy, scz = _body_increments(s, cfg, n)
@@ -717,7 +770,7 @@ def k_update(s: np.ndarray, cfg: np.ndarray) -> None:
     vmy = 1.5 * s[S_V + 1] - 0.5 * s[S_VP + 1]
     vmz = 1.5 * s[S_V + 2] - 0.5 * s[S_VP + 2]
     if int(s[S_NL]) % int(cfg[CFG_L_EVERY]) == 0:
-        _l_cycle(s, cfg, T, s[S_LATC], s[S_H], vmx, vmy, vmz)
+        _l_cycle(s, cfg, frame, T, s[S_LATC], s[S_H], vmx, vmy, vmz)
     s[S_NL] += 1.0
     zx = (s[S_WIE] + s[S_WEN]) * T
     zy = (s[S_WIE + 1] + s[S_WEN + 1]) * T
@@ -730,7 +783,7 @@ def k_update(s: np.ndarray, cfg: np.ndarray) -> None:
         vnz = s[S_VD0]
     _attitude_step(s, cfg, sgx, sgy, sgz, zx, zy, zz)
     s[S_T] = s[S_TJ]  # the position step's output (inertial: the Earth's angle) is at the new time
-    _position_step(s, cfg, T, vnx, vny, vnz)
+    _position_step(s, cfg, frame, T, vnx, vny, vnz)
     if inertial and cfg[CFG_VHOLD] > 0.5:
         vnx, vny, vnz = _inertial_hold(s, cfg, vnx, vny, vnz)
     for a in range(3):
@@ -754,6 +807,17 @@ def push_increment_s(s: np.ndarray, cfg: np.ndarray, t: float, ax: float, ay: fl
     0 when it was buffered, -1 when rejected because t is not after the last
     accepted sample.
     """
+    r = _buffer(s, cfg, t, ax, ay, az, bx, by, bz)
+    if r == 1:
+        k_update(s, cfg)
+    return r
+
+
+@kernel
+def _buffer(s: np.ndarray, cfg: np.ndarray, t: float, ax: float, ay: float, az: float,
+            bx: float, by: float, bz: float) -> int:
+    """The j cycle of :func:`push_increment_s` without its k update: 1 when one is due, 0 when
+    the sample was buffered, -1 when it was rejected."""
     dt = t - s[S_TJ]
     if not dt > 0.0:
         return -1
@@ -766,7 +830,6 @@ def push_increment_s(s: np.ndarray, cfg: np.ndarray, t: float, ax: float, ay: fl
     s[S_BUFT] += dt
     s[S_TJ] = t
     if j + 1 >= int(cfg[CFG_SAMPLES]):
-        k_update(s, cfg)
         return 1
     return 0
 
@@ -846,11 +909,24 @@ def run_increments(
 
     ``out`` needs at least ``len(t) // N`` rows; returns the number written.
     """
+    frame = int(cfg[CFG_FRAME])
+    if frame == GEOGRAPHIC:
+        return _run_increments(s, cfg, t, dtheta, dv, out, GEOGRAPHIC)
+    if frame == INERTIAL:
+        return _run_increments(s, cfg, t, dtheta, dv, out, INERTIAL)
+    return _run_increments(s, cfg, t, dtheta, dv, out, WANDER)
+
+
+@kernel
+def _run_increments(s: np.ndarray, cfg: np.ndarray, t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray,
+                    out: np.ndarray, frame: int) -> int:
+    """:func:`run_increments` compiled for one frame (see :func:`k_update`)."""
+    literally(frame)
     m = 0
     for i in range(t.shape[0]):
-        r = push_increment_s(s, cfg, t[i], dtheta[i, 0], dtheta[i, 1], dtheta[i, 2], dv[i, 0], dv[i, 1], dv[i, 2])
-        if r == 1:
-            solution_row(s, cfg, out[m])
+        if _buffer(s, cfg, t[i], dtheta[i, 0], dtheta[i, 1], dtheta[i, 2], dv[i, 0], dv[i, 1], dv[i, 2]) == 1:
+            _k_cycle(s, cfg, frame)
+            _solution_row(s, cfg, out[m], frame)
             m += 1
     return m
 
