@@ -242,3 +242,35 @@ def test_frames_run_without_jit(tmp_path):
         subprocess.run([sys.executable, "-c", SCRIPT, str(out)], check=True, env=env, timeout=300)
         got.append(np.load(out))
     np.testing.assert_allclose(got[1], got[0], rtol=1e-12, atol=1e-9)
+
+
+@pytest.mark.parametrize(("frame", "degraded"), [("geographic", True), ("wander", False)])
+def test_service_marks_geographic_degraded_near_the_pole(frame, degraded):
+    """The engine (mavins run/replay) at rest at 89.9 deg N: the geographic frame's solutions say
+    degraded, with one warning; the wander frame's do not."""
+    from mavins.aiding import FilterSettings
+    from mavins.core.records import ImuSample
+    from mavins.engine import Engine, EngineConfig
+
+    dt = 0.01
+    m = motion.stationary(89.9, 0.0, 0.0, 0.0, 30.0, dt, 400)
+    eng = Engine(EngineConfig(lat=89.9, lon=0.0, alt=0.0, heading=30.0, align=1.0, gyro_bias="none", frame=frame,
+                              filter=FilterSettings(aiding=())))
+    sols = []
+    for t, dth, dv in zip(m.t, m.dtheta, m.dv):
+        sol = eng.on_imu(ImuSample(float(t), tuple(dth / dt), tuple(dv / dt), None, 1, 1))
+        if sol is not None:
+            sols.append(sol)
+    assert sols
+    assert all(np.all(np.isfinite(s.row)) for s in sols)
+    assert all(s.degraded is degraded for s in sols)
+    warnings = [e for e in eng.take_events() if "geographic frame beyond" in e[1]]
+    assert len(warnings) == (1 if degraded else 0)
+
+
+def test_aided_frames_refused():
+    from mavins.aiding import FilterSettings
+    from mavins.engine import Engine, EngineConfig
+
+    with pytest.raises(ValueError, match="aiding none"):
+        Engine(EngineConfig(frame="wander", filter=FilterSettings(aiding=("gnss",))))
