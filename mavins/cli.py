@@ -598,10 +598,13 @@ def _engine_config(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     flt = FilterSettings(spec=_imu_spec(args), aiding=args.aiding, gate=args.gate, lever_arm=args.lever_arm)
     from .core.settings import strapdown_from_options
 
+    strapdown = strapdown_from_options(args)
+    if strapdown.frame != "geographic" and flt.aiding:
+        raise ValueError(f"--frame {strapdown.frame} navigates free inertial only (the filter works in the "
+                         "geographic frame): add --aiding none")
     return EngineConfig(lat=args.lat, lon=args.lon, alt=args.alt, heading=heading, declination=args.declination,
                         align=args.align, rate=args.rate, gyro_bias=args.gyro_bias, max_gap=args.max_gap,
-                        filter=flt, geoid_height=args.geoid_height,
-                        **strapdown_from_options(args).keywords())
+                        filter=flt, geoid_height=args.geoid_height, **strapdown.keywords())
 
 
 def _ingest_config(args: argparse.Namespace):  # type: ignore[no-untyped-def]

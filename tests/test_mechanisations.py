@@ -274,3 +274,13 @@ def test_aided_frames_refused():
 
     with pytest.raises(ValueError, match="aiding none"):
         Engine(EngineConfig(frame="wander", filter=FilterSettings(aiding=("gnss",))))
+
+
+def test_run_refuses_aiding_outside_the_geographic_frame(tmp_path):
+    proc = subprocess.run([*MAVINS, "run", "--master", "udpin:127.0.0.1:9", "--frame", "free", "--lat", "0", "--lon",
+                           "0", "--alt", "0"], env=ENV, capture_output=True, text=True, timeout=120, check=False,
+                          cwd=tmp_path)
+    assert proc.returncode == 2
+    assert proc.stderr.strip().splitlines() == [
+        ("mavins run: error: --frame free navigates free inertial only (the filter works in the geographic frame): "
+         "add --aiding none")]
