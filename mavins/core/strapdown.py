@@ -27,6 +27,13 @@ navigation-frame rotation correction (Strapdown Analytics 7.2.2.2).
 Position ([TW11] 11.4): ``C_n^e(k) = C_n^e(k-1) exp([xi x])``, ``xi =
 w_en^n(v_eff) T``, ``h(k) = h(k-1) - v_D,eff T``, with v_eff from the
 rectangular, trapezoidal or one-step Simpson (parabolic) rule.
+
+Frames (``--frame``, [ZS] Zhang & Sun ch. 2; docs/algorithms.md "Mechanisation frames"): the
+above is the geographic frame (2.4). The wander-azimuth (2.2) and free-azimuth (2.3) frames
+keep ``C_b^w``, ``v^w`` and ``C_w^e`` in the same slots with a transport rate free of tan L;
+the inertial frame (2.1) keeps ``C_b^i``, ``v^i`` and ``r^i`` (ECI = ECEF at the start). All
+report NED rows. Each frame's k cycle is compiled on its own (the frame is a compile-time
+constant), so the geographic kernel carries none of the others' branches.
 """
 
 from __future__ import annotations
