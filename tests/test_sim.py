@@ -841,7 +841,7 @@ def test_round_trip_turntable_stop_and_go() -> None:
 
 
 def test_builtin_scenarios_load_and_run() -> None:
-    assert set(builtin_names()) == {"car", "coning", "flight", "rins", "sculling", "static"}
+    assert set(builtin_names()) == {"car", "coning", "flight", "polar_flight", "polar_ship", "rins", "sculling", "static"}
     for name in builtin_names():
         s = load(name)
         assert s.name == name and s.description and s.rate > 0 and s.grade == "ideal" and s.earth == "wgs84"
