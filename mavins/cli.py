@@ -64,6 +64,7 @@ def _real(lo: float | None = None, hi: float | None = None, *, above: bool = Fal
 POSITIVE = dict(lo=0.0, above=True)  # ranges used by several options
 SYSID = (1, 255)
 HEADING_WORDS = ("auto", "gyrocompass", "mag", "vehicle")  # engine.HEADING_WORDS (not imported: --help stays light)
+AIDING_WORDS = ("gnss", "baro", "mag", "zupt")  # aiding.AIDING_KINDS, likewise
 
 
 class _Heading:
@@ -118,17 +119,18 @@ def _show_ranges(parser: argparse.ArgumentParser) -> None:
             action.help = f"{action.help} ({kind.describe(metavar)})"
 
 
+def _subparser(sub: argparse._SubParsersAction, name: str, help_text: str, description: str,
+               **kw: object) -> argparse.ArgumentParser:
+    """A subcommand whose --help shows every default."""
+    return sub.add_parser(name, help=help_text, description=description,
+                          formatter_class=argparse.ArgumentDefaultsHelpFormatter, **kw)
+
+
 def _add_nav(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "nav",
-        help="strapdown solution from IMU files (offline)",
-        description=(
-            "Integrate an IMU file (increments or rates, CONVENTIONS.md columns) from an initial "
-            "state and write the navigation solution, one row per attitude update at the time of "
-            "its last sample. Trailing samples that do not fill an update are not used."
-        ),
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
-    )
+    p = _subparser(sub, "nav", "strapdown solution from IMU files (offline)",
+                   "Integrate an IMU file (increments or rates, CONVENTIONS.md columns) from an initial "
+                   "state and write the navigation solution, one row per attitude update at the time of "
+                   "its last sample. Trailing samples that do not fill an update are not used.")
     p.add_argument("imu", type=Path, nargs="+", metavar="IMU.csv",
                    help="increments (t,dtheta_*,dv_*) or rates (t,gyro_*,acc_*); several files (same times, "
                         "same body frame) are monitored and fused first (docs/redundancy.md)")
@@ -214,40 +216,37 @@ def _imu_spec(args: argparse.Namespace, extra_keys: tuple[str, ...] = ()) -> str
     return {k: float(v) for k, v in keys.items()}
 
 
-class _Aiding:
+class _Words:
+    """A comma list of allowed words (``at_least`` of them, ``cast`` applied), or the one word
+    ``empty`` for the empty tuple: --aiding (``none``), --imus (``all``)."""
+
+    def __init__(self, allowed: Callable[[], tuple[str, ...]], empty: str, at_least: int = 1,
+                 cast: Callable[[str], object] = str, sort: bool = False) -> None:
+        self.allowed, self.empty, self.at_least, self.cast, self.sort = allowed, empty, at_least, cast, sort
+
+    def describe(self, metavar: str | None = None) -> str:
+        more = "" if self.at_least == 1 else f"{self.at_least} or more of "
+        return f"{more}{','.join(self.allowed())} or {self.empty}"
+
+    def __call__(self, text: str) -> tuple:
+        if text.strip() == self.empty:
+            return ()
+        words = list(dict.fromkeys(w.strip() for w in text.split(",") if w.strip()))
+        if self.sort:
+            words.sort()
+        if len(words) < self.at_least or any(w not in self.allowed() for w in words):
+            raise argparse.ArgumentTypeError(f"expected a comma list of {self.describe()}, got {text!r}")
+        return tuple(self.cast(w) for w in words)
+
+
+def _Aiding() -> _Words:  # noqa: N802 - used like the other option types
     """--aiding: a comma list of aiding kinds, or none."""
-
-    def describe(self, metavar: str | None = None) -> str:
-        return "gnss,baro,mag,zupt or none"
-
-    def __call__(self, text: str) -> tuple[str, ...]:
-        from .aiding import AIDING_KINDS
-
-        if text.strip() == "none":
-            return ()
-        kinds = tuple(k.strip() for k in text.split(",") if k.strip())
-        bad = [k for k in kinds if k not in AIDING_KINDS]
-        if bad or not kinds:
-            raise argparse.ArgumentTypeError(f"expected a comma list of {','.join(AIDING_KINDS)} or none, got {text!r}")
-        return kinds
+    return _Words(lambda: AIDING_WORDS, "none")
 
 
-class _ImuList:
+def _ImuList() -> _Words:  # noqa: N802
     """--imus: all, or two or more IMU numbers 0..2."""
-
-    def describe(self, metavar: str | None = None) -> str:
-        return "all or two or more of 0,1,2"
-
-    def __call__(self, text: str) -> tuple[int, ...]:
-        if text.strip() == "all":
-            return ()
-        try:
-            ids = tuple(sorted({int(x) for x in text.split(",")}))
-        except ValueError:
-            ids = ()
-        if len(ids) < 2 or not all(0 <= i <= 2 for i in ids):
-            raise argparse.ArgumentTypeError(f"expected all or two or more of 0,1,2 separated by commas, got {text!r}")
-        return ids
+    return _Words(lambda: ("0", "1", "2"), "all", at_least=2, cast=int, sort=True)
 
 
 class _Outage:
@@ -377,19 +376,13 @@ def _add_sim(sub: argparse._SubParsersAction) -> None:
     from sim import SCENARIO_DIR
 
     names = sorted(p.stem for p in SCENARIO_DIR.glob("*.toml"))
-    p = sub.add_parser(
-        "sim",
-        help="IMU simulator: write files or stream MAVLink like an autopilot",
-        description=(
-            "Simulate a scenario with exact IMU increments and ground truth. Write the contract's "
-            "files (imu.csv, imu_rates.csv, truth.csv, init.json) with -o DIR, or stream it over "
-            "MAVLink with --stream URL (HEARTBEAT, HIGHRES_IMU or RAW_IMU, SIM_STATE truth, "
-            "GPS_RAW_INT, SCALED_PRESSURE)."
-        ),
-        epilog="built-in scenarios: " + ", ".join(names) + ". A path to your own .toml works too "
-        "(see docs/simulator.md).",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
-    )
+    p = _subparser(sub, "sim", "IMU simulator: write files or stream MAVLink like an autopilot",
+                   "Simulate a scenario with exact IMU increments and ground truth. Write the contract's "
+                   "files (imu.csv, imu_rates.csv, truth.csv, init.json) with -o DIR, or stream it over "
+                   "MAVLink with --stream URL (HEARTBEAT, HIGHRES_IMU or RAW_IMU, SIM_STATE truth, "
+                   "GPS_RAW_INT, SCALED_PRESSURE).",
+                   epilog="built-in scenarios: " + ", ".join(names) + ". A path to your own .toml works too "
+                          "(see docs/simulator.md).")
     p.add_argument("scenario", metavar="SCENARIO", help="built-in name or path to a scenario .toml")
     out = p.add_mutually_exclusive_group(required=True)
     out.add_argument("-o", "--output", type=Path, metavar="DIR", help="write the files into DIR")
@@ -619,14 +612,10 @@ def _ingest_config(args: argparse.Namespace):  # type: ignore[no-untyped-def]
 
 
 def _add_run(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "run",
-        help="the MAVLink INS service",
-        description="Connect to a MAVLink stream, align on the IMU, navigate on sensor time and publish "
-        "ATTITUDE, ATTITUDE_QUATERNION, LOCAL_POSITION_NED, GLOBAL_POSITION_INT, ODOMETRY and HEARTBEAT. "
-        "Stops cleanly on Ctrl-C or SIGTERM.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
-    )
+    p = _subparser(sub, "run", "the MAVLink INS service",
+                   "Connect to a MAVLink stream, align on the IMU, navigate on sensor time and publish "
+                   "ATTITUDE, ATTITUDE_QUATERNION, LOCAL_POSITION_NED, GLOBAL_POSITION_INT, ODOMETRY and HEARTBEAT. "
+                   "Stops cleanly on Ctrl-C or SIGTERM.")
     p.add_argument("--master", default="udpin:127.0.0.1:14551", metavar="URL",
                    help="pymavlink connection string to read (udpin:/udpout:/tcp:/serial device)")
     p.add_argument("--out", action="append", default=[], metavar="URL", help="extra output link (repeatable)")
@@ -734,13 +723,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _add_replay(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "replay",
-        help="run the service pipeline over a log (.tlog, ArduPilot .bin, PX4 .ulg)",
-        description="Replay a recorded log through the same pipeline as 'mavins run', as fast as possible, "
-        "writing each output set as a solution row (same results as live).",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
-    )
+    p = _subparser(sub, "replay", "run the service pipeline over a log (.tlog, ArduPilot .bin, PX4 .ulg)",
+                   "Replay a recorded log through the same pipeline as 'mavins run', as fast as possible, "
+                   "writing each output set as a solution row (same results as live).")
     p.add_argument("log", type=Path, metavar="LOG", help=".tlog, .bin or .ulg")
     p.add_argument("-o", "--output", type=Path, required=True, metavar="NAV.csv", help="solution CSV to write")
     p.add_argument("--rerun", type=Path, metavar="FILE.rrd", help="also write a Rerun recording")
@@ -777,13 +762,9 @@ def _cmd_replay(args: argparse.Namespace) -> int:
 
 
 def _add_demo(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "demo",
-        help="loopback simulation: simulator -> UDP -> service -> UDP, recorded to Rerun",
-        description="Stream a built-in scenario from the simulator over UDP into the service, collect what it "
-        "publishes, record everything to Rerun and print the errors against the simulator's truth.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
-    )
+    p = _subparser(sub, "demo", "loopback simulation: simulator -> UDP -> service -> UDP, recorded to Rerun",
+                   "Stream a built-in scenario from the simulator over UDP into the service, collect what it "
+                   "publishes, record everything to Rerun and print the errors against the simulator's truth.")
     p.add_argument("--scenario", default="flight", help="built-in scenario or .toml path")
     p.add_argument("--duration", type=_real(**POSITIVE), default=120.0, metavar="S", help="simulated seconds")
     p.add_argument("--speed", type=_Speed(), default="5", metavar="X|max", help="pace: 1 = real time")
@@ -845,12 +826,10 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 
 def _add_key(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "key",
-        help="make a MAVLink 2 signing key file",
-        description="Write a 32-byte signing key (as 64 hex digits, file mode 600). With --passphrase the key is "
-        "SHA-256 of the passphrase, the same key MAVProxy's 'signing setup PASSPHRASE' uses; without, a random key.",
-    )
+    p = _subparser(sub, "key", "make a MAVLink 2 signing key file",
+                   "Write a 32-byte signing key (as 64 hex digits, file mode 600). With --passphrase the key is "
+                   "SHA-256 of the passphrase, the same key MAVProxy's 'signing setup PASSPHRASE' uses; without, a "
+                   "random key.")
     p.add_argument("file", type=Path, metavar="FILE")
     p.add_argument("--passphrase", help="derive the key from a passphrase (MAVProxy's convention)")
     p.add_argument("--force", action="store_true", help="overwrite an existing file")
@@ -902,9 +881,7 @@ def _add_analyze(sub: argparse._SubParsersAction) -> None:
             "when matplotlib is installed; and prints the budget."
         ),
         epilog="Runs go to all local cores (--jobs) or, with --cluster tcp://HOST:8786, to a running Dask "
-        "scheduler whose workers have mavins installed (pip install 'mavins[cluster]').",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
-    )
+        "scheduler whose workers have mavins installed (pip install 'mavins[cluster]').")
     p.add_argument("scenario", metavar="SCENARIO", help="built-in scenario name or path to a scenario .toml")
     p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="write the files into DIR")
     p.add_argument("--runs", type=_positive_int(2, 1_000_000), default=100, metavar="N", help="Monte Carlo runs")

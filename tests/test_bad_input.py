@@ -367,11 +367,13 @@ def _bad_values(kind: object) -> list[str]:
         if kind.hi is not None:
             vals.append(str(kind.hi * 2 + 1))
         return vals
+    if isinstance(kind, cli._Words):  # --aiding (none), --imus (all)
+        return {"none": ["gps", "gnss,foo", ","], "all": ["0", "0,3", "a,b", "any"]}[kind.empty]
     name = type(kind).__name__
     return {"_Heading": ["400", "-361", "nan", "north"], "_Speed": ["0", "-1", "nan", "fast"],
             "_Size": ["10x10", "20000x900", "abc"], "_Seconds": ["0", "-5", "nan", "soon"],
-            "_Vec3": ["1,2", "1,2,nan", "1,2,5000", "abc"], "_Aiding": ["gps", "gnss,foo", ","],
-            "_Outage": ["5,1", "-1,2", "nan,3", "abc"], "_ImuList": ["0", "0,3", "a,b", "any"]}[name]
+            "_Vec3": ["1,2", "1,2,nan", "1,2,5000", "abc"],
+            "_Outage": ["5,1", "-1,2", "nan,3", "abc"]}[name]
 
 
 NUMERIC = _numeric_options()
@@ -403,6 +405,12 @@ def test_heading_words_are_the_engines() -> None:
     from mavins import engine
 
     assert cli.HEADING_WORDS == engine.HEADING_WORDS
+
+
+def test_aiding_words_are_the_filters() -> None:
+    from mavins import aiding
+
+    assert cli.AIDING_WORDS == aiding.AIDING_KINDS
 
 
 def test_issue6_run_rate_0_and_other_non_positive_service_values(world: Path) -> None:

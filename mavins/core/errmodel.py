@@ -282,17 +282,8 @@ def matmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 @kernel
 def matmul_bt(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``a @ b.T`` for 2-D arrays."""
-    n, k = a.shape
-    m = b.shape[0]
-    out = np.zeros((n, m))
-    for i in range(n):
-        for j in range(m):
-            acc = 0.0
-            for p in range(k):
-                acc += a[i, p] * b[j, p]
-            out[i, j] = acc
-    return out
+    """``a @ b.T`` for 2-D arrays (:func:`matmul` on the transposed view)."""
+    return matmul(a, b.T)
 
 
 @kernel
