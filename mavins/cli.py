@@ -239,12 +239,12 @@ class _Words:
         return tuple(self.cast(w) for w in words)
 
 
-def _Aiding() -> _Words:  # noqa: N802 - used like the other option types
+def _Aiding() -> _Words:
     """--aiding: a comma list of aiding kinds, or none."""
     return _Words(lambda: AIDING_WORDS, "none")
 
 
-def _ImuList() -> _Words:  # noqa: N802
+def _ImuList() -> _Words:
     """--imus: all, or two or more IMU numbers 0..2."""
     return _Words(lambda: ("0", "1", "2"), "all", at_least=2, cast=int, sort=True)
 

@@ -509,7 +509,7 @@ def test_interrupted_writers_leave_the_old_output_and_no_temporary(world: Path, 
     previous = signal.getsignal(signal.SIGTERM)
     before = snapshot(world)
     with monkeypatch.context() as m:
-        _interrupt_on(m, files, "format_rows", 0, how)  # nav: while writing the solution
+        _interrupt_on(m, files, "write_rows", 0, how)  # nav: while writing the solution
         assert run_cli("nav", "imu.csv", "--init", "init.json", "-o", "existing.csv")[0] == code
     with monkeypatch.context() as m:
         _interrupt_on(m, mavins.pipeline.Pipeline, "handle", 100, how)  # replay: halfway through the log

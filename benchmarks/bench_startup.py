@@ -1,0 +1,112 @@
+"""Start-up of the live path: process start to the first navigated output of ``mavins run``.
+
+The service compiles (cold: empty numba cache) or loads (warm) every kernel
+before it binds its link, prints ``ready: listening on``, then aligns over
+0.2 s of sensor time on a static HIGHRES_IMU stream sent by this script as
+soon as it reads that line (100 Hz sensor time, sent at 1 kHz), and
+publishes. Reported: seconds from process start to ``ready`` and to the first
+ATTITUDE it publishes; ``mavins demo`` runs the same warm-up before its
+simulator starts, so its first navigated sample comes as late as this plus
+its alignment window. Goal (issue 13): a cold start under 5 s.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+BASELINE = "the same command with a warm numba cache, in the same run"
+NOTES: list[str] = []
+GOAL_S = 5.0
+
+
+def _port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def start_once(cache: str, timeout: float = 300.0) -> tuple[float, float]:
+    """(s to 'ready', s to the first ATTITUDE) of one `mavins run` with NUMBA_CACHE_DIR=cache."""
+    from mavins.link.mavlink import mavlink
+
+    p_in, p_out = _port(), _port()
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.bind(("127.0.0.1", p_out))
+    rx.settimeout(0.2)
+    env = dict(os.environ, NUMBA_CACHE_DIR=cache)
+    t0 = time.perf_counter()
+    proc = subprocess.Popen([sys.executable, "-m", "mavins.cli", "run", "--master", f"udpin:127.0.0.1:{p_in}",
+                             "--out", f"udpout:127.0.0.1:{p_out}", "--lat", "45", "--lon", "7", "--alt", "100",
+                             "--heading", "0", "--align", "0.2"], env=env, cwd=ROOT, stderr=subprocess.PIPE,
+                            stdout=subprocess.DEVNULL, text=True)
+    ready = threading.Event()
+    t_ready = [float("nan")]
+
+    def watch() -> None:
+        for line in proc.stderr:  # type: ignore[union-attr]
+            if "ready: listening on" in line and not ready.is_set():
+                t_ready[0] = time.perf_counter() - t0
+                ready.set()
+
+    threading.Thread(target=watch, daemon=True).start()
+    stop = threading.Event()
+
+    def feed() -> None:
+        ready.wait(timeout)
+        mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+        tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        i = 0
+        while not stop.is_set() and i < 100_000:
+            i += 1
+            msg = mav.highres_imu_encode(10_000 * i, 0.0, 0.0, -9.80665, 0.0, 0.0, 0.0, 0.2, 0.0, 0.4, 1013.0, 0.0,
+                                         100.0, 20.0, 0b111111111, 0)
+            tx.sendto(msg.pack(mav), ("127.0.0.1", p_in))
+            time.sleep(0.001)
+
+    threading.Thread(target=feed, daemon=True).start()
+    parser = mavlink.MAVLink(None)
+    t_first = float("nan")
+    try:
+        while time.perf_counter() - t0 < timeout:
+            try:
+                data = rx.recv(65535)
+            except TimeoutError:
+                continue
+            msgs = parser.parse_buffer(data) or []
+            if any(m.get_type() == "ATTITUDE" for m in msgs):
+                t_first = time.perf_counter() - t0
+                break
+    finally:
+        stop.set()
+        proc.terminate()
+        proc.wait(timeout=30)
+        rx.close()
+    return t_ready[0], t_first
+
+
+def main(argv: Sequence[str] = ()) -> list[dict]:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--quick", action="store_true", help="accepted for run_all; the runs are the same")
+    p.parse_args(list(argv))
+    rows = []
+    with tempfile.TemporaryDirectory() as cache:
+        for case in ("cold (empty numba cache)", "warm (cache from the cold run)"):
+            t_ready, t_first = start_once(cache)
+            goal = f"< {GOAL_S:g} s: {'met' if t_first < GOAL_S else 'MISS'}" if case.startswith("cold") else ""
+            rows.append({"case": f"mavins run start-up, {case}: first navigated output", "seconds": t_first,
+                         "value": f"ready after {t_ready:.2f} s", "goal": goal})
+    return rows
+
+
+if __name__ == "__main__":
+    for r in main(sys.argv[1:]):
+        print(f"{r['case']}: {r['seconds']:.2f} s ({r['value']}) {r['goal']}")
