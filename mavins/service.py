@@ -18,6 +18,8 @@ import gc
 import logging
 import select
 import struct
+import subprocess
+import sys
 import threading
 import time
 from collections import Counter
@@ -25,6 +27,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .core import jit
+from .core import strapdown as sd
+from .core.runner import initial_state
+from .core.settings import strapdown_of
 from .engine import EngineConfig, State
 from .files import SolutionWriter
 from .link import publish
@@ -44,6 +49,7 @@ GPS_INPUT_RATE_HZ = 5.0  # GPS_INPUT per second of sensor time (--gps-input)
 UNIX_USEC_MIN = 1_000_000_000_000_000  # a GNSS time_usec above this (2001-09-09) is UNIX time, i.e. UTC
 GPS_EPOCH_UNIX_S = 315964800.0  # 1980-01-06 00:00:00 UTC
 GPS_LEAP_S = 18.0  # GPS - UTC since 2017-01-01 (IERS Bulletin C)
+HELPER_WAIT_S = 120.0  # s: the cold-start compile helper is waited for at most this long, then stopped
 DRAIN_S = 2.0  # s: on a stop, input already in the socket is processed for at most this long
 
 
@@ -90,9 +96,19 @@ def warm_up(engine_cfg: EngineConfig, pub: publish.PublishConfig) -> float:
     """
     t0 = time.monotonic()
     cold = not jit.cache_is_warm()
+    helper = None
     if cold:
         log.warning("first start of this version on this machine: compiling the navigation kernels "
                     "(once; later starts load them from %s)", jit.numba.config.CACHE_DIR)
+        # two cores at once: a second process compiles the filter's measurement and propagation
+        # kernels into the shared cache while this one compiles the strapdown kernel; the filter's
+        # top-level kernels then load them (29 -> 17 s on a 2-core machine, benchmarks/bench_startup.py)
+        code = "from mavins.aiding import warm_measurements; warm_measurements()"
+        helper = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        kcfg = sd.make_config(**strapdown_of(engine_cfg).keywords())
+        state = initial_state({"t": 0.0, "lat": 45.0, "lon": 7.0, "h": 100.0, "vn": 0.0, "ve": 0.0, "vd": 0.0,
+                               "roll": 0.0, "pitch": 0.0, "yaw": 0.0})
+        sd.push_rate_scalars(state, kcfg, 0.01, 0.0, 0.0, 0.0, 0.0, 0.0, -9.8)
     cfg = dataclasses.replace(engine_cfg, lat=45.0, lon=7.0, alt=100.0, heading=0.0, align=0.05,
                               rate=max(engine_cfg.rate, 1.0))
     pipe = Pipeline(cfg, IngestConfig(message="HIGHRES_IMU"), own_component=-1)
@@ -106,6 +122,12 @@ def warm_up(engine_cfg: EngineConfig, pub: publish.PublishConfig) -> float:
     if out is None:
         raise RuntimeError("warm-up produced no solution")  # the engine itself is broken
     publish.encode(mav, out, pub, 0)
+    if helper is not None:
+        try:  # normally done already; what it did not finish this process has compiled itself
+            helper.wait(timeout=HELPER_WAIT_S)
+        except subprocess.TimeoutExpired:
+            helper.kill()
+            helper.wait()
     took = time.monotonic() - t0
     if cold:
         log.warning("navigation kernels compiled in %.1f s", took)
