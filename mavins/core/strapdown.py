@@ -908,20 +908,19 @@ def push_rate(s: np.ndarray, cfg: np.ndarray, t: float, w: np.ndarray, f: np.nda
     return push_rate_scalars(s, cfg, t, w[0], w[1], w[2], f[0], f[1], f[2])
 
 
-@kernel
 def run_increments(
     s: np.ndarray, cfg: np.ndarray, t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray, out: np.ndarray
 ) -> int:
     """Batch j/k loop over increment rows; writes one solution row per k update.
 
     ``out`` needs at least ``len(t) // N`` rows; returns the number written.
+    The frame is chosen here, in Python, and reaches the kernel as a compile-time
+    constant, so a run compiles only its own frame's k cycle (a dispatch inside
+    the kernel compiles every frame: the first ``mavins nav`` waited twice as long).
     """
     frame = int(cfg[CFG_FRAME])
-    if frame == GEOGRAPHIC:
-        return _run_increments(s, cfg, t, dtheta, dv, out, GEOGRAPHIC)
-    if frame == INERTIAL:
-        return _run_increments(s, cfg, t, dtheta, dv, out, INERTIAL)
-    return _run_increments(s, cfg, t, dtheta, dv, out, WANDER)
+    kernel_frame = GEOGRAPHIC if frame == GEOGRAPHIC else INERTIAL if frame == INERTIAL else WANDER
+    return _run_increments(s, cfg, t, dtheta, dv, out, kernel_frame)
 
 
 @kernel
