@@ -248,11 +248,10 @@ class LiveFilter:
 def warm_measurements() -> None:
     """Load or compile the kernels of every measurement update and the covariance propagation
     they flush (run in a second process on a cold start: service.warm_up)."""
-    from .core.runner import initial_state
+    from .core.runner import rest_state
 
     cfg = sd.make_config()
-    s = initial_state({"t": 0.0, "lat": 45.0, "lon": 7.0, "h": 100.0, "vn": 0.0, "ve": 0.0, "vd": 0.0,
-                       "roll": 0.0, "pitch": 0.0, "yaw": 0.0})
+    s = rest_state()
     f = LiveFilter(FilterSettings(aiding=AIDING_KINDS))
     f.start(s, np.zeros(3), 0.01, 2)
     for kind, args in (("zupt", ()), ("gnss", (45.0, 7.0, 100.0, (0.0, 0.0, 0.0), 1.0, 2.0, 0.3)),

@@ -220,13 +220,13 @@ class _Words:
     """A comma list of allowed words (``at_least`` of them, ``cast`` applied), or the one word
     ``empty`` for the empty tuple: --aiding (``none``), --imus (``all``)."""
 
-    def __init__(self, allowed: Callable[[], tuple[str, ...]], empty: str, at_least: int = 1,
+    def __init__(self, allowed: tuple[str, ...], empty: str, at_least: int = 1,
                  cast: Callable[[str], object] = str, sort: bool = False) -> None:
         self.allowed, self.empty, self.at_least, self.cast, self.sort = allowed, empty, at_least, cast, sort
 
     def describe(self, metavar: str | None = None) -> str:
         more = "" if self.at_least == 1 else f"{self.at_least} or more of "
-        return f"{more}{','.join(self.allowed())} or {self.empty}"
+        return f"{more}{','.join(self.allowed)} or {self.empty}"
 
     def __call__(self, text: str) -> tuple:
         if text.strip() == self.empty:
@@ -234,19 +234,19 @@ class _Words:
         words = list(dict.fromkeys(w.strip() for w in text.split(",") if w.strip()))
         if self.sort:
             words.sort()
-        if len(words) < self.at_least or any(w not in self.allowed() for w in words):
+        if len(words) < self.at_least or any(w not in self.allowed for w in words):
             raise argparse.ArgumentTypeError(f"expected a comma list of {self.describe()}, got {text!r}")
         return tuple(self.cast(w) for w in words)
 
 
 def _Aiding() -> _Words:
     """--aiding: a comma list of aiding kinds, or none."""
-    return _Words(lambda: AIDING_WORDS, "none")
+    return _Words(AIDING_WORDS, "none")
 
 
 def _ImuList() -> _Words:
     """--imus: all, or two or more IMU numbers 0..2."""
-    return _Words(lambda: ("0", "1", "2"), "all", at_least=2, cast=int, sort=True)
+    return _Words(("0", "1", "2"), "all", at_least=2, cast=int, sort=True)
 
 
 class _Outage:

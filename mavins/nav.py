@@ -217,14 +217,12 @@ def _batch_job(job: tuple[Path, Path, Path, NavOptions]) -> tuple[int, str | Non
 def _warm(opts: NavOptions) -> None:
     """Load or compile the kernel ``run_nav`` will call, on two dummy samples."""
     from .core import strapdown as sd
-    from .core.runner import initial_state
+    from .core.runner import rest_state
 
     cfg = sd.make_config(**opts.strapdown.keywords())
     run = sd.run_increments if opts.input == "increments" else sd.run_rates
-    state = initial_state({"t": 0.0, "lat": 45.0, "lon": 7.0, "h": 0.0, "vn": 0.0, "ve": 0.0, "vd": 0.0,
-                           "roll": 0.0, "pitch": 0.0, "yaw": 0.0})
     t = np.array([0.01, 0.02])
-    run(state, cfg, t, np.zeros((2, 3)), np.zeros((2, 3)), np.empty((3, sd.OUT_SIZE)))
+    run(rest_state(), cfg, t, np.zeros((2, 3)), np.zeros((2, 3)), np.empty((3, sd.OUT_SIZE)))
 
 
 def run_nav_batch(imu_paths: list[Path], init_path: Path | None, out_dir: Path, opts: NavOptions,

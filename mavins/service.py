@@ -28,7 +28,7 @@ from pathlib import Path
 
 from .core import jit
 from .core import strapdown as sd
-from .core.runner import initial_state
+from .core.runner import rest_state
 from .core.settings import strapdown_of
 from .engine import EngineConfig, State
 from .files import SolutionWriter
@@ -102,13 +102,11 @@ def warm_up(engine_cfg: EngineConfig, pub: publish.PublishConfig) -> float:
                     "(once; later starts load them from %s)", jit.numba.config.CACHE_DIR)
         # two cores at once: a second process compiles the filter's measurement and propagation
         # kernels into the shared cache while this one compiles the strapdown kernel; the filter's
-        # top-level kernels then load them (29 -> 17 s on a 2-core machine, benchmarks/bench_startup.py)
+        # top-level kernels then load them (29.4 -> 20.4 s on a 2-core machine, benchmarks/bench_startup.py)
         code = "from mavins.aiding import warm_measurements; warm_measurements()"
         helper = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         kcfg = sd.make_config(**strapdown_of(engine_cfg).keywords())
-        state = initial_state({"t": 0.0, "lat": 45.0, "lon": 7.0, "h": 100.0, "vn": 0.0, "ve": 0.0, "vd": 0.0,
-                               "roll": 0.0, "pitch": 0.0, "yaw": 0.0})
-        sd.push_rate_scalars(state, kcfg, 0.01, 0.0, 0.0, 0.0, 0.0, 0.0, -9.8)
+        sd.push_rate_scalars(rest_state(), kcfg, 0.01, 0.0, 0.0, 0.0, 0.0, 0.0, -9.8)
     cfg = dataclasses.replace(engine_cfg, lat=45.0, lon=7.0, alt=100.0, heading=0.0, align=0.05,
                               rate=max(engine_cfg.rate, 1.0))
     pipe = Pipeline(cfg, IngestConfig(message="HIGHRES_IMU"), own_component=-1)

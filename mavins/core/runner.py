@@ -28,6 +28,15 @@ def initial_state(init: Mapping[str, float]) -> np.ndarray:
     )
 
 
+REST = {"t": 0.0, "lat": 45.0, "lon": 7.0, "h": 100.0, "vn": 0.0, "ve": 0.0, "vd": 0.0, "roll": 0.0,
+        "pitch": 0.0, "yaw": 0.0}  # a level vehicle at rest: what the kernel warm-ups start from
+
+
+def rest_state() -> np.ndarray:
+    """Kernel state of :data:`REST` (for loading or compiling kernels before real data)."""
+    return initial_state(REST)
+
+
 def to_file_units(rows: np.ndarray) -> np.ndarray:
     """Kernel solution rows (radians) to file units (degrees for lat, lon, Euler)."""
     out = rows.copy()
