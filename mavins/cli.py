@@ -10,7 +10,7 @@ import argparse
 import math
 import sys
 from pathlib import Path
-from typing import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 
 from .argcheck import checked
 
@@ -117,6 +117,12 @@ def _show_ranges(parser: argparse.ArgumentParser) -> None:
         plain = kind.describe(metavar).split(" in ")[-1]  # "1..6" is already said by "--samples ... 1..6"
         if plain not in action.help:
             action.help = f"{action.help} ({kind.describe(metavar)})"
+
+
+def _say(command: str, lines: Iterable[str], stream=None) -> None:  # type: ignore[no-untyped-def]
+    """Print ``lines`` as ``mavins COMMAND: line`` (to stderr unless ``stream`` is given)."""
+    for line in lines:
+        print(f"mavins {command}: {line}", file=stream or sys.stderr)
 
 
 def _subparser(sub: argparse._SubParsersAction, name: str, help_text: str, description: str,
@@ -716,9 +722,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         timer.daemon = True  # a signal may end the run first; never wait for the timer
         timer.start()
     print(f"mavins run: ready: listening on {args.master}", file=sys.stderr, flush=True)
-    summary = svc.run(stop)
-    for line in summary.lines():
-        print(f"mavins run: {line}", file=sys.stderr)
+    _say("run", svc.run(stop).lines())
     return 0
 
 
@@ -755,9 +759,8 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     if res.report is not None and res.report.damaged:
         print(f"mavins replay: warning: replayed what could be read: IMU samples from sensor time "
               f"{res.t_first:.3f} to {res.t_last:.3f} s", file=sys.stderr)
-    for line in res.report.lines() if res.report is not None else ():
-        tag = "" if line.split(": ", 1)[-1].startswith("note:") else "warning: "
-        print(f"mavins replay: {tag}{line}", file=sys.stderr)
+    lines = res.report.lines() if res.report is not None else ()
+    _say("replay", (("" if ln.split(": ", 1)[-1].startswith("note:") else "warning: ") + ln for ln in lines))
     return 0
 
 
@@ -818,8 +821,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         stop.set()
         print("mavins demo: interrupted", file=sys.stderr)
         return 130
-    for line in report.lines():
-        print(f"mavins demo: {line}")
+    _say("demo", report.lines(), sys.stdout)
     if not args.no_rerun:
         print(f"mavins demo: recording written to {args.rerun} (open it with: rerun {args.rerun})")
     return 0
