@@ -286,7 +286,13 @@ def rotvec_to_quat(phi: np.ndarray) -> np.ndarray:
 @kernel
 def rotvec_to_quat_s(x: float, y: float, z: float) -> Quat:
     """:func:`rotvec_to_quat` on scalars."""
-    s2 = x * x + y * y + z * z
+    c, k = half_angle_coeffs(x * x + y * y + z * z)
+    return c, k * x, k * y, k * z
+
+
+@kernel
+def half_angle_coeffs(s2: float) -> tuple[float, float]:
+    """``(cos(s/2), sin(s/2)/s)`` for ``s2 = s^2`` (Bortz 1971); Taylor series below SMALL_ANGLE."""
     if s2 < SMALL_ANGLE * SMALL_ANGLE:
         c = 1.0 - s2 / 8.0 + s2 * s2 / 384.0 - s2 * s2 * s2 / 46080.0
         k = 0.5 - s2 / 48.0 + s2 * s2 / 3840.0 - s2 * s2 * s2 / 645120.0
@@ -294,7 +300,7 @@ def rotvec_to_quat_s(x: float, y: float, z: float) -> Quat:
         s = np.sqrt(s2)
         c = np.cos(0.5 * s)
         k = np.sin(0.5 * s) / s
-    return c, k * x, k * y, k * z
+    return c, k
 
 
 @kernel
@@ -333,16 +339,15 @@ def rotvec_to_dcm(phi: np.ndarray) -> np.ndarray:
 
 @kernel
 def rotvec_to_dcm_s(x: float, y: float, z: float) -> Mat9:
-    """:func:`rotvec_to_dcm` on scalars; row-major 9-tuple."""
-    s2 = x * x + y * y + z * z
-    if s2 < SMALL_ANGLE * SMALL_ANGLE:
-        a1 = 1.0 - s2 / 6.0 + s2 * s2 / 120.0 - s2 * s2 * s2 / 5040.0
-        a2 = 0.5 - s2 / 24.0 + s2 * s2 / 720.0 - s2 * s2 * s2 / 40320.0
-    else:
-        s = np.sqrt(s2)
-        a1 = np.sin(s) / s
-        a2 = (1.0 - np.cos(s)) / s2
-    return dcm_from_coeffs_s(x, y, z, a1, a2)
+    """:func:`rotvec_to_dcm` on scalars; row-major 9-tuple.
+
+    From the quaternion's half-angle coefficients ``c = cos(s/2)``, ``k = sin(s/2)/s``
+    (:func:`rotvec_to_quat_s`, series below SMALL_ANGLE included): ``C = I + 2 c [q x] + 2 [q x]^2``
+    with ``q = k phi`` (Savage 1998, "Strapdown inertial navigation integration algorithm
+    design part 1", eq. 23), i.e. ``sin s/s = 2 c k`` and ``(1 - cos s)/s^2 = 2 k^2``.
+    """
+    c, k = half_angle_coeffs(x * x + y * y + z * z)
+    return dcm_from_coeffs_s(x, y, z, 2.0 * c * k, 2.0 * k * k)
 
 
 @kernel
