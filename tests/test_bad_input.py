@@ -562,7 +562,10 @@ def test_nav_in_chunks_is_bit_identical_and_locates_errors(world: Path, monkeypa
 
     text = imu_csv(503)
     (world / "long.csv").write_text(text, encoding="utf-8")
+    from mavins import nav
+
     monkeypatch.setattr(files, "CHUNK_BYTES", 1000)  # about 6 rows a chunk: 80 chunks, updates across borders
+    monkeypatch.setattr(nav, "PIECE_ROWS", 5)  # and each chunk integrated in pieces of 5 rows (writer thread)
     for samples in ("1", "2", "3", "6"):
         code, stderr = run_cli("nav", "long.csv", "--init", "init.json", "-o", "sol.csv", "--samples", samples)
         assert code == 0, stderr
