@@ -1,0 +1,284 @@
+"""Mutation-testing kills for mavins/engine.py (docs/testing.md).
+
+The engine in-process, fed ImuSamples at rest built from the physics typed here
+(``f^b = -C_n^b [0, 0, gamma]``, ``w^b = C_n^b w_ie^n``, ``m^b = C_n^b m^n``; ZYX
+Euler angles, NED, FRD; WGS-84 Earth rate and Somigliana gravity as in
+docs/conventions.md), never from the engine or the core. Checked: the states and
+their events (WAITING -> ALIGNING -> NAVIGATING, docs/conventions.md ``--align``),
+which heading source is used (``--heading`` degrees or auto/gyrocompass/mag/vehicle),
+the gyro bias taken at rest, the motion and time-gap rules, the output rate, and the
+published solution row (t, lat, lon, h, vn, ve, vd, roll, pitch, yaw, q) after
+alignment.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from mavins.aiding import FilterSettings
+from mavins.core.records import ImuSample
+from mavins.engine import Engine, EngineConfig, State
+
+LAT, LON, ALT = 47.397742, 8.545594, 488.0
+OMEGA = 7.292115e-5
+A, F = 6378137.0, 1.0 / 298.257223563
+E2 = F * (2.0 - F)
+DT = 0.01
+
+
+def gamma(lat_deg: float, h: float) -> float:
+    s2 = math.sin(math.radians(lat_deg)) ** 2
+    g = 9.7803253359 * (1.0 + 0.00193185265241 * s2) / math.sqrt(1.0 - E2 * s2)
+    return g * (1.0 - 2.0 / A * (1.0 + F + 0.00344978650684 - 2.0 * F * s2) * h + 3.0 * h * h / (A * A))
+
+
+def c_bn(roll, pitch, yaw) -> np.ndarray:
+    cr, sr, cp, sp, cy, sy = (math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch), math.cos(yaw),
+                              math.sin(yaw))
+    rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1.0]])
+    ry = np.array([[cp, 0, sp], [0, 1.0, 0], [-sp, 0, cp]])
+    rx = np.array([[1.0, 0, 0], [0, cr, -sr], [0, sr, cr]])
+    return rz @ ry @ rx
+
+
+ATT = (math.radians(3.0), math.radians(-2.0), math.radians(30.0))
+M_N = np.array([0.21, 0.02, 0.43])  # gauss, NED: declination atan2(0.02, 0.21) = 5.44 deg east
+
+
+def rest(t, att=ATT, gyro_bias=(0.0, 0.0, 0.0), mag=True, lat=LAT, h=ALT):
+    cnb = c_bn(*att).T
+    la = math.radians(lat)
+    w = cnb @ np.array([OMEGA * math.cos(la), 0.0, -OMEGA * math.sin(la)]) + np.asarray(gyro_bias)
+    f = cnb @ np.array([0.0, 0.0, -gamma(lat, h)])
+    m = tuple(cnb @ M_N) if mag else None
+    return ImuSample(t, tuple(w), tuple(f), m, 1, 1)
+
+
+def cfg(**kw) -> EngineConfig:
+    base = dict(lat=LAT, lon=LON, alt=ALT, align=0.5, rate=50.0, filter=FilterSettings(aiding=()))
+    base.update(kw)
+    return EngineConfig(**base)
+
+
+def align(e: Engine, t0=1.0, n=None, **kw):
+    """Feed samples at rest until the engine navigates (0.5 s of alignment at 100 Hz)."""
+    t = t0
+    for _ in range(n or 60):
+        e.on_imu(rest(t, **kw))
+        t = round(t + DT, 9)
+        if e.state is State.NAVIGATING:
+            break
+    return t
+
+
+def texts(e: Engine) -> list[str]:
+    return [f"{lvl} {txt}" for lvl, txt in e.take_events()]
+
+
+def test_bad_settings_are_refused():
+    with pytest.raises(ValueError, match="heading must be degrees or one of auto, gyrocompass, mag, vehicle"):
+        Engine(cfg(heading="north"))
+    with pytest.raises(ValueError, match="gyro_bias must be estimate or none"):
+        Engine(cfg(gyro_bias="guess"))
+    with pytest.raises(ValueError, match="--frame wander navigates free inertial only"):
+        Engine(cfg(frame="wander", filter=FilterSettings()))
+    Engine(cfg(frame="wander"))  # no aiding: fine
+    for word in ("auto", "gyrocompass", "mag", "vehicle"):
+        Engine(cfg(heading=word))
+
+
+def test_states_and_initial_position():
+    e = Engine(cfg(lat=None, lon=None, alt=None))
+    assert e.state is State.WAITING and not e.position_known and e.origin is None
+    assert texts(e) == ["INFO WAITING: for an initial position (--lat/--lon/--alt or the vehicle's GPS)"]
+    assert e.on_imu(rest(1.0)) is None
+    assert e.state is State.WAITING
+    e.set_position(47.5, 8.25, 500.0, "GPS_RAW_INT", 2.0)
+    e.set_position(10.0, 10.0, 10.0, "GLOBAL_POSITION_INT")  # the first one stays
+    assert e.origin == (47.5, 8.25, 500.0) and e.position_known
+    assert texts(e) == ["INFO initial position from GPS_RAW_INT: 47.5000000, 8.2500000, 500.0 m"]
+    e.on_imu(rest(1.01, lat=47.5, h=500.0))
+    assert e.state is State.ALIGNING
+    assert texts(e) == ["INFO ALIGNING: initial position known"]
+
+
+def test_position_from_options():
+    e = Engine(cfg())
+    assert e.origin == (LAT, LON, ALT)
+    assert texts(e) == ["INFO initial position from options: 47.3977420, 8.5455940, 488.0 m"]
+
+
+def test_gnss_before_navigation_is_the_initial_position():
+    e = Engine(cfg(lat=None, lon=None, alt=None))
+    e.on_gnss(None, 47.5, 8.25, 500.0, None, 2.0, 4.0, 0.3, "GPS_INPUT")
+    assert e.origin == (47.5, 8.25, 500.0)
+    assert e._pos_sigma == 2.0
+    e.on_baro(None, 100.0, 0.5)  # not navigating: nothing happens
+
+
+def nav_rows(e: Engine, t: float, n: int, **kw):
+    rows = []
+    for _ in range(n):
+        out = e.on_imu(rest(t, **kw))
+        if out is not None:
+            rows.append(out)
+        t = round(t + DT, 9)
+    return rows, t
+
+
+@pytest.mark.parametrize("heading, vehicle_yaw, mag, source, yaw_deg", [
+    (30.0, None, True, "--heading", 30.0),
+    (-150.0, None, True, "--heading", -150.0),
+    ("auto", math.radians(30.0), True, "vehicle ATTITUDE", 30.0),
+    ("vehicle", math.radians(30.0), False, "vehicle ATTITUDE", 30.0),
+    ("auto", None, True, "magnetometer", 30.0),
+    ("mag", None, True, "magnetometer", 30.0),
+    ("auto", None, False, "gyrocompass", 30.0),
+    ("gyrocompass", math.radians(99.0), True, "gyrocompass", 30.0),
+])
+def test_alignment_heading_and_published_row(heading, vehicle_yaw, mag, source, yaw_deg):
+    """The vehicle's true attitude is (3, -2, yaw_deg) deg; each source must find that yaw."""
+    att = (ATT[0], ATT[1], math.radians(yaw_deg))
+    decl = math.degrees(math.atan2(M_N[1], M_N[0]))
+    e = Engine(cfg(heading=heading, declination=decl))
+    if vehicle_yaw is not None:
+        e.set_vehicle_yaw(vehicle_yaw)
+    e.take_events()
+    t = align(e, mag=mag, att=att)
+    assert e.state is State.NAVIGATING
+    assert e.heading_used == source
+    ev = texts(e)
+    assert ev[0] == "INFO ALIGNING: initial position known"
+    assert ev[1] == f"INFO NAVIGATING: aligned over 0.5 s: roll 3.00 pitch -2.00 heading {yaw_deg:.2f} deg from " \
+                    f"{source}"
+    rows, _ = nav_rows(e, t, 6, mag=mag, att=att)
+    assert len(rows) == 3  # 2 samples per update at 100 Hz: 50 Hz updates, all due at --rate 50
+    r = rows[-1].row
+    assert r[0] == pytest.approx(t + 5 * DT, abs=1e-9)
+    assert r[1] == pytest.approx(math.radians(LAT), abs=1e-9) and r[2] == pytest.approx(math.radians(LON), abs=1e-9)
+    assert r[3] == pytest.approx(ALT, abs=1e-3)
+    np.testing.assert_allclose(r[4:7], 0.0, atol=1e-3)
+    np.testing.assert_allclose(r[7:9], ATT[:2], atol=1e-6)
+    assert math.remainder(r[9] - math.radians(yaw_deg), 2 * math.pi) == pytest.approx(0.0, abs=1e-6)
+    assert rows[-1].origin == (LAT, LON, ALT)
+    assert rows[-1].degraded is False
+    # the published body rate w_ib^b, bias removed: at rest the Earth rate in body axes
+    np.testing.assert_allclose(rows[-1].gyro, np.array(rest(0.0, att=att).gyro), rtol=0, atol=1e-12)
+
+
+def test_missing_heading_sources_fall_back_to_gyrocompass():
+    e = Engine(cfg(heading="vehicle"))
+    align(e)
+    assert e.heading_used == "gyrocompass"
+    assert "WARNING no vehicle ATTITUDE seen: heading from gyrocompass" in texts(e)
+    e = Engine(cfg(heading="mag"))
+    align(e, mag=False)
+    assert e.heading_used == "gyrocompass"
+    assert "WARNING no magnetometer data: heading from gyrocompass" in texts(e)
+
+
+def test_all_zero_magnetometer_is_no_magnetometer():
+    e = Engine(cfg(heading="auto"))
+    t = 1.0
+    for _ in range(60):
+        s = rest(t)
+        e.on_imu(ImuSample(s.t, s.gyro, s.accel, (0.0, 0.0, 0.0), 1, 1))
+        t = round(t + DT, 9)
+    assert e.heading_used == "gyrocompass"
+
+
+BIAS = (2e-4, -3e-4, 1e-4)  # rad/s: 41, 62, 21 deg/h
+
+
+def test_gyro_bias_at_rest():
+    e = Engine(cfg(heading=30.0))
+    align(e, gyro_bias=BIAS)
+    np.testing.assert_allclose(e.gyro_bias, BIAS, rtol=0, atol=1e-12)
+    assert "INFO gyro bias estimated at rest: 41.3 -61.9 20.6 deg/h" in texts(e)
+    e = Engine(cfg(heading=30.0, gyro_bias="none"))
+    align(e, gyro_bias=BIAS)
+    np.testing.assert_array_equal(e.gyro_bias, 0.0)
+    assert not any("gyro bias" in x for x in texts(e))
+    e = Engine(cfg(heading="gyrocompass"))  # the gyrocompass has used the Earth rate: no bias from it
+    align(e)
+    np.testing.assert_array_equal(e.gyro_bias, 0.0)
+
+
+def test_motion_restarts_the_alignment():
+    e = Engine(cfg(heading=30.0))
+    e.on_imu(rest(1.0))
+    e.take_events()
+    s = rest(1.01)
+    e.on_imu(ImuSample(1.01, (0.0, 0.0, 0.1001), s.accel, None, 1, 1))  # |w| > 0.1 rad/s
+    assert e.counters["align_restarts"] == 1
+    assert texts(e) == ["WARNING motion during alignment: restarting it"]
+    e.on_imu(ImuSample(1.02, (0.0, 0.0, 0.1001), s.accel, None, 1, 1))  # nothing collected: no new warning
+    assert e.counters["align_restarts"] == 2 and texts(e) == []
+    e.on_imu(ImuSample(1.03, (0.0, 0.0, 0.0999), s.accel, None, 1, 1))  # below: collected
+    g = gamma(LAT, ALT)
+    e.on_imu(ImuSample(1.04, (0.0, 0.0, 0.0), (0.0, 0.0, -(g + 1.51)), None, 1, 1))  # |f| - g > 1.5
+    assert e.counters["align_restarts"] == 3
+    e.on_imu(ImuSample(1.05, (0.0, 0.0, 0.0), (0.0, 0.0, -(g - 1.51)), None, 1, 1))
+    assert e.counters["align_restarts"] == 4
+    e.on_imu(ImuSample(1.06, (0.0, 0.0, 0.0), (0.0, 0.0, -(g + 1.49)), None, 1, 1))
+    e.on_imu(ImuSample(1.07, (0.0, 0.0, 0.0), (0.0, 0.0, -(g - 1.49)), None, 1, 1))
+    assert e.counters["align_restarts"] == 4
+    # the window restarts at the first sample after the motion: 0.5 s from 1.06
+    t = 1.08
+    while e.state is not State.NAVIGATING:
+        e.on_imu(rest(t))
+        t = round(t + DT, 9)
+    assert t == pytest.approx(1.57, abs=1e-9)
+
+
+def test_time_gaps():
+    e = Engine(cfg(heading=30.0))
+    t = 1.0
+    for _ in range(10):
+        e.on_imu(rest(t))
+        t = round(t + DT, 9)
+    e.on_imu(rest(t + 0.02))  # 3 nominal intervals: bridged
+    assert e.counters["gaps_bridged"] == 1
+    e.on_imu(rest(t + 0.035))  # 1.5 nominal: nothing
+    assert e.counters["gaps_bridged"] == 1
+    e.take_events()
+    e.on_imu(rest(t + 1.6))  # a long gap while aligning: the window starts over
+    assert e.counters["gaps_long"] == 1
+    assert texts(e) == ["WARNING sensor-time gap of 1.565 s during alignment: restarting it"]
+    t = align(e, t0=t + 1.61)
+    assert e.state is State.NAVIGATING
+    e.take_events()
+    rows, t = nav_rows(e, t, 4)
+    e.on_imu(rest(t + 2.0))  # a long gap while navigating: not integrated, degraded
+    assert e.counters["gaps_long"] == 2 and e.degraded
+    assert texts(e) == ["WARNING sensor-time gap of 2.010 s not integrated: solution degraded"]
+    rows, t2 = nav_rows(e, round(t + 2.01, 9), 4)
+    assert rows and all(r.degraded for r in rows)
+    assert t2 - 2 * DT - 1e-9 <= rows[-1].row[0] <= t2 - DT + 1e-9
+    np.testing.assert_allclose(rows[-1].row[4:7], 0.0, atol=1e-3)  # the gap was not integrated
+    e.on_imu(rest(t2 + 2.5))
+    assert texts(e) == []  # already degraded: warned once
+    e.on_imu(rest(t2 + 70.0))  # beyond restart_gap (60 s): alignment starts over
+    assert e.counters["time_jumps"] == 1 and e.counters["restarts"] == 1
+    assert e.state is State.ALIGNING
+    assert texts(e) == ["INFO ALIGNING: sensor time jumped 67.5 s forward"]
+
+
+def test_restart_without_position_waits():
+    e = Engine(cfg(lat=None, lon=None, alt=None))
+    e.restart("why")
+    assert e.state is State.WAITING and e.counters["restarts"] == 1
+
+
+@pytest.mark.parametrize("rate, per_second", [(50.0, 50), (10.0, 10), (20.0, 20), (1.0, 1)])
+def test_output_rate(rate, per_second):
+    e = Engine(cfg(heading=30.0, rate=rate))
+    t = align(e)
+    rows, _ = nav_rows(e, t, 200)
+    assert len(rows) == pytest.approx(2 * per_second, abs=1)
+    # one set each time sensor time crosses a multiple of 1/rate, on the first update at or after it
+    k = np.floor(np.array([r.row[0] for r in rows]) * rate + 1e-9)
+    np.testing.assert_array_equal(np.diff(k), 1.0)
