@@ -273,12 +273,12 @@ def test_restart_without_position_waits():
     assert e.state is State.WAITING and e.counters["restarts"] == 1
 
 
-@pytest.mark.parametrize("rate, per_second", [(50.0, 50), (10.0, 10), (20.0, 20), (1.0, 1)])
-def test_output_rate(rate, per_second):
+@pytest.mark.parametrize("rate", [50.0, 20.0, 10.0])
+def test_output_rate(rate):
     e = Engine(cfg(heading=30.0, rate=rate))
     t = align(e)
-    rows, _ = nav_rows(e, t, 200)
-    assert len(rows) == pytest.approx(2 * per_second, abs=1)
+    rows, _ = nav_rows(e, t, 60)  # 0.6 s
+    assert len(rows) == pytest.approx(0.6 * rate, abs=1)
     # one set each time sensor time crosses a multiple of 1/rate, on the first update at or after it
     k = np.floor(np.array([r.row[0] for r in rows]) * rate + 1e-9)
     np.testing.assert_array_equal(np.diff(k), 1.0)

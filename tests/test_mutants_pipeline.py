@@ -334,3 +334,76 @@ def test_msg_time():
     assert pl._msg_time(wire(lambda m: m.scaled_pressure_encode(1_500, 900.0, 0.0, 0))) == pytest.approx(1.5,
                                                                                                         abs=1e-12)
     assert pl._msg_time(wire(lambda m: m.heartbeat_encode(0, 0, 0, 0, 0))) is None
+
+
+# --- survivors of the first run ---------------------------------------------------------------
+class FakeRecorder:
+    def __init__(self):
+        self.gnss = []
+
+        self.samples = []
+
+    def on_gnss(self, t, ned):
+        self.gnss.append((t, tuple(ned)))
+
+    def on_sample(self, t, gyro, accel):
+        self.samples.append((t, tuple(gyro), tuple(accel)))
+
+
+def test_counters_count(pipe):
+    for _ in range(2):
+        pipe.handle(mavlink.MAVLink_bad_data(b"\x00", "junk"))
+        pipe.handle(raw_int(fix=1))
+    assert pipe.counters == {"bad_data": 2, "gnss_no_fix": 2}
+
+
+def test_gps_input_velocity_reaches_the_engine(pipe):
+    pipe.handle(gps_input())
+    assert pipe.engine.calls[-1][1][4] == (1.5, -2.25, 0.5)
+
+
+def test_small_but_valid_values():
+    """Sub-metre accuracies and a 0.01 DOP are values, not "unknown"; 0.5 hPa is a pressure."""
+    fix = pl.gnss_fix(gps_input(hacc=0.5, vacc=0.75), 0.0)
+    assert fix[5:7] == (0.5, 0.75)
+    assert pl.gnss_invalid(fix) is None
+    assert pl.gnss_invalid(fix_with(sh=0.5, sv=0.5)) is None
+    fix = pl.gnss_fix(hil_gps(eph=65534, epv=1), 0.0)
+    assert fix[6] == pytest.approx(0.01 * SIGMA_V, abs=1e-15)
+
+
+def test_low_pressure_is_used(pipe):
+    pipe.handle(wire(lambda m: m.scaled_pressure_encode(1_500, 0.5, 0.0, 2000)))
+    assert pipe.engine.calls[-1][0] == "baro"
+
+
+def test_gnss_drawn_in_the_recording(pipe):
+    """The recording (docs/recording.md) shows each accepted fix at its NED offset from the origin."""
+    pipe.recorder = FakeRecorder()
+    pipe.handle(raw_int())
+    assert pipe.recorder.gnss == []  # no sample yet
+    pipe.handle(highres(5_500_000))
+    pipe.handle(raw_int())
+    assert pipe.recorder.gnss == []  # no origin yet
+    pipe.engine.origin = (47.397742, 8.545594, 505.0)  # 7 m above the fix (488 m + 10 m geoid)
+    pipe.handle(raw_int())
+    (t, ned), = pipe.recorder.gnss
+    assert t == 5.5
+    assert pipe.recorder.samples == [(5.5, (0.0, 0.0, 0.0), pytest.approx((0.0, 0.0, -9.81), abs=1e-6))]
+    assert ned == pytest.approx((0.0, 0.0, 7.0), abs=1e-6)
+    pipe.recorder = None
+    pipe.handle(raw_int())  # no recorder: nothing to draw
+
+
+def test_restart_needs_more_than_a_second_back(pipe):
+    pipe.handle(highres(10_000_000))
+    pipe.handle(highres(9_000_000))  # exactly 1 s back: rejected, no restart
+    assert pipe.engine.calls == [("imu", 10.0)]
+
+
+def test_the_pipeline_builds_its_engine_and_ingest():
+    from mavins.engine import Engine
+    from mavins.link.ingest import Ingest
+    p = pl.Pipeline(EngineConfig(lat=1.0, lon=2.0, alt=3.0))
+    assert isinstance(p.engine, Engine) and p.engine.origin == (1.0, 2.0, 3.0)
+    assert isinstance(p.ingest, Ingest) and p.imuset is None
