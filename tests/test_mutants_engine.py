@@ -282,3 +282,313 @@ def test_output_rate(rate):
     # one set each time sensor time crosses a multiple of 1/rate, on the first update at or after it
     k = np.floor(np.array([r.row[0] for r in rows]) * rate + 1e-9)
     np.testing.assert_array_equal(np.diff(k), 1.0)
+
+
+# -- aided: the filter's measurements through the engine ------------------------------------------
+# Expected values from the Kalman equations by hand (docs/filter.md): right after the alignment
+# the covariance is diagonal (position sigma from the first fix's accuracy, else 10 m, each
+# axis; velocity 0.1 m/s; baro offset 50 m), and the few hundredths of a second propagated
+# before the update add relatively < 1e-3 to it. A position fix p_m with R = diag(sh^2, sh^2,
+# sv^2) and H = [0 0 I] moves each axis by P/(P + R) of (p_m - p); a barometric height h_m with
+# H = (-1 on the down position, +1 on the offset) moves h by P_h/(P_h + P_off + R) of (h_m - h).
+
+def radii(lat_deg: float) -> tuple[float, float]:
+    """WGS-84 meridian and prime-vertical radii (m)."""
+    s2 = math.sin(math.radians(lat_deg)) ** 2
+    return A * (1.0 - E2) / (1.0 - E2 * s2) ** 1.5, A / math.sqrt(1.0 - E2 * s2)
+
+
+def ned_of(row, ref) -> np.ndarray:
+    """North, east, down (m) of a solution row from another row (small offsets)."""
+    rm, rn = radii(LAT)
+    return np.array([(row[1] - ref[1]) * (rm + ALT), (row[2] - ref[2]) * (rn + ALT) * math.cos(math.radians(LAT)),
+                     -(row[3] - ref[3])])
+
+
+def fix_at(ned) -> tuple[float, float, float]:
+    """lat, lon (deg), h (m) of the point ned (m) from (LAT, LON, ALT)."""
+    rm, rn = radii(LAT)
+    return (LAT + math.degrees(ned[0] / (rm + ALT)),
+            LON + math.degrees(ned[1] / ((rn + ALT) * math.cos(math.radians(LAT)))), ALT - ned[2])
+
+
+def aided(aiding=("gnss", "baro"), **kw) -> Engine:
+    e = Engine(cfg(heading=30.0, filter=FilterSettings(aiding=aiding), **kw))
+    return e
+
+
+def step(e: Engine, t: float, **kw):
+    """Feed samples until the next output; returns it and the next sample time."""
+    for _ in range(10):
+        out = e.on_imu(rest(t, **kw))
+        t = round(t + DT, 9)
+        if out is not None:
+            return out, t
+    raise AssertionError("no output")
+
+
+def test_gnss_position_fix_moves_by_the_gain():
+    e = aided()
+    t = align(e)
+    before, t = step(e, t)
+    off = np.array([4.0, -6.0, 3.0])  # m NED
+    e.on_gnss(None, *fix_at(off), None, 10.0, 5.0, 0.3)  # P 100 m^2 each axis: gains 0.5, 0.5, 100/125
+    assert e.filter.counters["gnss_pos_accepted"] == 1 and e.filter.counters["gnss_vel_accepted"] == 0
+    after, t = step(e, t)
+    np.testing.assert_allclose(ned_of(after.row, before.row), [2.0, -3.0, 2.4], rtol=0, atol=0.01)
+    assert after.unc.abs_pos and after.unc.abs_hgt and not after.unc.glitch
+    assert after.unc.sigma_pos == pytest.approx([50.0 ** 0.5, 50.0 ** 0.5, 20.0 ** 0.5], rel=2e-3)
+
+
+def test_gnss_sigma_of_the_first_fix_is_the_initial_position_sigma():
+    e = aided(lat=None, lon=None, alt=None)
+    e.on_gnss(None, LAT, LON, ALT, None, 2.0, 3.0, 0.3, "GPS_RAW_INT")  # the initial position, 2 m
+    t = align(e)
+    assert e.state is State.NAVIGATING
+    before, t = step(e, t)
+    assert before.unc.sigma_pos == pytest.approx([2.0, 2.0, 2.0], rel=2e-3)
+    e.on_gnss(None, *fix_at([4.0, 0.0, -4.0]), None, 2.0, 4.0, 0.3, "GPS_RAW_INT")  # gains 4/8, 4/20
+    after, t = step(e, t)
+    np.testing.assert_allclose(ned_of(after.row, before.row), [2.0, 0.0, -0.8], rtol=0, atol=0.01)
+
+
+def test_gnss_velocity_fix():
+    e = aided()
+    t = align(e)
+    before, t = step(e, t)
+    e.on_gnss(None, LAT, LON, ALT, (0.3, -0.2, 0.1), 10.0, 10.0, 0.1)  # P_v 0.01, R 0.01: gain 0.5
+    assert e.filter.counters["gnss_vel_accepted"] == 1
+    after, t = step(e, t)
+    np.testing.assert_allclose(after.row[4:7], [0.15, -0.1, 0.05], rtol=0, atol=0.003)
+
+
+def test_gnss_outside_the_gate_is_rejected_and_counted():
+    e = aided()
+    t = align(e)
+    before, t = step(e, t)
+    e.on_gnss(None, *fix_at([80.0, 0.0, 0.0]), None, 2.0, 2.0, 0.3)  # 80 / sqrt(100 + 4) = 7.8 > 5 sigma
+    assert e.filter.counters["gnss_pos_rejected"] == 1 and e.filter.counters["gnss_pos_accepted"] == 0
+    after, t = step(e, t)
+    np.testing.assert_allclose(ned_of(after.row, before.row), 0.0, atol=1e-3)
+    assert after.unc.glitch and not after.unc.abs_pos
+    assert after.unc.pos_ratio == pytest.approx((80.0 / 104.0 ** 0.5 / 5.0) ** 2, rel=2e-3)
+
+
+def test_gnss_fix_stamped_ahead_waits_for_its_time():
+    e = aided()
+    t = align(e)
+    before, t = step(e, t)
+    t_now = before.row[0]
+    e.on_gnss(t_now + 0.05, *fix_at([4.0, 0.0, 0.0]), None, 10.0, 10.0, 0.3)  # 2.5 updates ahead
+    assert e.filter.counters["gnss_pos_accepted"] == 0
+    rows = []
+    for _ in range(3):
+        out, t = step(e, t)
+        rows.append(ned_of(out.row, before.row)[0])
+    assert rows[0] == pytest.approx(0.0, abs=1e-3) and rows[1] == pytest.approx(0.0, abs=1e-3)
+    assert rows[2] == pytest.approx(2.0, abs=0.01)
+    assert e.filter.counters["gnss_pos_accepted"] == 1
+
+
+def test_gnss_not_in_aiding_is_ignored():
+    e = aided(aiding=("baro",))
+    t = align(e)
+    before, t = step(e, t)
+    e.on_gnss(None, *fix_at([4.0, 0.0, 0.0]), None, 10.0, 10.0, 0.3)
+    after, t = step(e, t)
+    np.testing.assert_allclose(ned_of(after.row, before.row), 0.0, atol=1e-3)
+
+
+def test_measurements_before_navigation_change_nothing():
+    e = aided()
+    e.on_imu(rest(1.0))
+    assert e.state is State.ALIGNING
+    e.on_gnss(None, *fix_at([4.0, 0.0, 0.0]), (1.0, 0.0, 0.0), 10.0, 10.0, 0.3)
+    e.on_baro(None, ALT + 10.0, 0.5)
+    e.on_baro(1.0, ALT + 10.0, 0.5)
+    assert e.origin == (LAT, LON, ALT)  # the options' position stays
+    assert not e.filter.counters
+    t = align(e, t0=1.01)
+    before, t = step(e, t)
+    assert before.row[3] == pytest.approx(ALT, abs=1e-3)
+
+
+def test_baro_height_moves_by_the_gain():
+    e = aided()
+    t = align(e)
+    before, t = step(e, t)
+    e.on_baro(None, ALT + 10.0, 0.5)  # P_h 100, P_off 2500, R 0.25
+    assert e.filter.counters["baro_accepted"] == 1
+    after, t = step(e, t)
+    assert after.row[3] - before.row[3] == pytest.approx(10.0 * 100.0 / 2600.25, abs=0.004)
+    # the offset (baro minus ellipsoidal height) took P_off/S of it
+    assert e.filter.bias[12] == pytest.approx(10.0 * 2500.0 / 2600.25, abs=0.05)
+
+
+def test_baro_stamped_ahead_waits_for_its_time():
+    e = aided()
+    t = align(e)
+    before, t = step(e, t)
+    e.on_baro(before.row[0] + 0.03, ALT + 10.0, 0.5)
+    assert e.filter.counters["baro_accepted"] == 0
+    first, t = step(e, t)
+    assert first.row[3] == pytest.approx(before.row[3], abs=1e-3)
+    second, t = step(e, t)
+    assert second.row[3] - before.row[3] == pytest.approx(10.0 * 100.0 / 2600.25, abs=0.004)
+
+
+def test_baro_sigma_reaches_the_filter():
+    e = aided()
+    t = align(e)
+    before, t = step(e, t)
+    e.on_baro(None, ALT + 10.0, 50.0)  # R 2500
+    after, t = step(e, t)
+    assert after.row[3] - before.row[3] == pytest.approx(10.0 * 100.0 / 5100.0, abs=0.004)
+
+
+def test_gnss_lost_and_recovered_are_announced_once():
+    e = aided()
+    t = align(e)
+    before, t = step(e, t)
+    t_now = before.row[0]
+    e.on_gnss(t_now - 2.97, LAT, LON, ALT, None, 10.0, 10.0, 0.3)  # accepted, 2.97 s old (at rest: v dt = 0)
+    assert e.filter.counters["gnss_pos_accepted"] == 1
+    e.take_events()
+    out, t = step(e, t)  # 2.99 s after the fix
+    assert out.unc.abs_pos and texts(e) == []
+    out, t = step(e, t)  # 3.01 s: lost
+    assert texts(e) == ["WARNING GNSS lost: no accepted fix for 3 s, free inertial"]
+    assert e.filter.counters["gnss_lost"] == 1
+    out, t = step(e, t)
+    assert texts(e) == []  # once
+    e.on_gnss(None, LAT, LON, ALT, None, 10.0, 10.0, 0.3)
+    out, t = step(e, t)
+    assert texts(e) == ["INFO GNSS recovered: position aided again"]
+    out, t = step(e, t)
+    assert texts(e) == []
+
+
+def moving(t, a_n, att=ATT):
+    """A sample of a vehicle at attitude att accelerating at a_n (NED m/s^2) near (LAT, ALT)."""
+    cnb = c_bn(*att).T
+    la = math.radians(LAT)
+    w = cnb @ np.array([OMEGA * math.cos(la), 0.0, -OMEGA * math.sin(la)])
+    f = cnb @ (np.asarray(a_n, dtype=float) - np.array([0.0, 0.0, gamma(LAT, ALT)]))
+    return ImuSample(t, tuple(w), tuple(f), None, 1, 1)
+
+
+def kick(e: Engine, t: float, dv):
+    """One attitude update (2 samples, just after an output) changing the velocity by dv (m/s NED)."""
+    a = np.asarray(dv) / (2 * DT)
+    assert e.on_imu(moving(t, a)) is None
+    out = e.on_imu(moving(round(t + DT, 9), a))
+    return out, round(t + 2 * DT, 9)
+
+
+@pytest.mark.parametrize("dv, diverged", [
+    ((-4500.0, -3500.0, -2500.0), True),  # |vn| + |ve| + |vd| = 10500 m/s: beyond any vehicle
+    ((4500.0, 3000.0, 2000.0), False),  # 9500 m/s: published
+])
+def test_speed_beyond_any_vehicle_is_never_published(dv, diverged):
+    e = aided(aiding=())
+    t = align(e)
+    _, t = step(e, t)
+    e.take_events()
+    out, t = kick(e, t, dv)
+    if not diverged:
+        np.testing.assert_allclose(out.row[4:7], dv, rtol=0, atol=1.0)
+        assert e.counters["diverged"] == 0 and e.state is State.NAVIGATING
+        return
+    assert out is None
+    assert e.counters["diverged"] == 1 and e.counters["restarts"] == 1
+    assert texts(e) == ["ERROR solution diverged (non-finite or beyond any vehicle): re-aligning",
+                        "INFO ALIGNING: solution diverged"]
+    assert e.state is State.ALIGNING
+    t = align(e, t0=t)  # and it starts over at the same position
+    out, t = step(e, t)
+    assert out.row[3] == pytest.approx(ALT, abs=1e-3) and out.origin == (LAT, LON, ALT)
+    np.testing.assert_allclose(out.row[4:7], 0.0, atol=1e-3)
+
+
+@pytest.mark.parametrize("alt, diverged", [(1.001e6, True), (-1.001e6, True), (0.999e6, False)])
+def test_height_beyond_any_vehicle_is_never_published(alt, diverged):
+    e = aided(aiding=(), alt=alt)
+    t = 1.0
+    for _ in range(60):
+        out = e.on_imu(rest(t, h=alt))
+        t = round(t + DT, 9)
+        if out is not None or e.counters["diverged"]:
+            break
+    assert e.counters["diverged"] == (1 if diverged else 0)
+    assert (out is None) == diverged
+
+
+def test_non_finite_solution_is_never_published():
+    e = aided(aiding=())
+    t = align(e)
+    _, t = step(e, t)
+    nan = ImuSample(t, (0.0, 0.0, 0.0), (0.0, math.nan, -9.8), None, 1, 1)
+    assert e.on_imu(nan) is None
+    assert e.on_imu(rest(round(t + DT, 9))) is None
+    assert e.counters["diverged"] == 1 and e.state is State.ALIGNING
+
+
+def test_restart_while_navigating_starts_the_alignment_over():
+    e = aided(aiding=())
+    t = align(e)
+    _, t = step(e, t)
+    e.take_events()
+    e.restart("autopilot restarted")
+    e.restart("again")
+    assert e.counters["restarts"] == 2
+    assert texts(e) == ["INFO ALIGNING: autopilot restarted"]
+    assert e.state is State.ALIGNING
+    # the sensor clock went back; samples every 5 ms now: the nominal interval is learnt afresh
+    t = 0.5
+    for _ in range(4):
+        assert e.on_imu(rest(t)) is None
+        t = round(t + 0.005, 9)
+    assert e.on_imu(rest(round(t + 0.007, 9))) is None  # 12 ms: over twice 5 ms
+    assert e.counters["gaps_bridged"] == 1
+    t = round(t + 0.012, 9)
+    while e.state is not State.NAVIGATING:
+        e.on_imu(rest(t))
+        t = round(t + 0.005, 9)
+    rows = []
+    while len(rows) < 3:
+        out = e.on_imu(rest(t))
+        t = round(t + 0.005, 9)
+        if out is not None:
+            rows.append(out)
+    assert rows[0].row[0] < 1.1  # published on the new clock, straight away
+    assert rows[-1].unc.resets == 2
+    np.testing.assert_allclose(rows[-1].row[4:7], 0.0, atol=1e-3)
+
+
+def test_long_gap_is_not_integrated():
+    e = aided(aiding=())
+    t = align(e)
+    before, t = step(e, t)
+    t_gap = round(t + 2.0, 9)
+    e.on_imu(moving(t_gap, (1.0, 0.0, 0.0)))  # after 2 s: counts for the nominal 10 ms only
+    out = e.on_imu(moving(round(t_gap + DT, 9), (1.0, 0.0, 0.0)))
+    assert out is not None and out.degraded
+    assert out.row[4] == pytest.approx(0.02, abs=1e-3)  # 1 m/s^2 for 2 x 10 ms, not 2.01 s
+
+
+def test_geographic_frame_limit_degrades_the_solution():
+    lat = 89.6
+    e = Engine(cfg(heading=30.0, lat=lat))
+    e.take_events()
+    t = align(e, lat=lat)
+    e.take_events()
+    out, t = step(e, t, lat=lat)
+    assert out.degraded
+    assert texts(e) == ["WARNING geographic frame beyond |lat| 89.5 deg: solution degraded (use --frame wander, "
+                        "free or inertial)"]
+    out, t = step(e, t, lat=lat)
+    assert out.degraded and texts(e) == []
+    e = Engine(cfg(heading=30.0, lat=89.4))
+    t = align(e, lat=89.4)
+    out, t = step(e, t, lat=89.4)
+    assert not out.degraded
