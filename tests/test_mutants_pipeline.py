@@ -407,3 +407,41 @@ def test_the_pipeline_builds_its_engine_and_ingest():
     p = pl.Pipeline(EngineConfig(lat=1.0, lon=2.0, alt=3.0))
     assert isinstance(p.engine, Engine) and p.engine.origin == (1.0, 2.0, 3.0)
     assert isinstance(p.ingest, Ingest) and p.imuset is None
+
+
+def highres_of(t_us, imu, gz):
+    return wire(lambda m: m.highres_imu_encode(t_us, 0.0, 0.0, -9.81, 0.0, 0.0, gz, 0.2, 0.0, 0.4, 1013.0, 0.0,
+                                               0.0, 20.0, 0b1_1111_1111, imu))
+
+
+def test_imus_are_fused_before_the_engine():
+    """--imus 0,1: both HIGHRES_IMU streams reach one ImuSet (docs/redundancy.md), the engine gets
+    one sample per instant, the least-squares fusion of two identically mounted equal-noise IMUs:
+    their mean."""
+    from mavins.aiding import FilterSettings
+    from mavins.imuset import ImuSet
+    from mavins.link.ingest import IngestConfig
+
+    p = pl.Pipeline(EngineConfig(filter=FilterSettings(spec="tactical")), IngestConfig(imus=(0, 1),
+                                                                                      false_alarm=1e-5))
+    assert isinstance(p.imuset, ImuSet) and p.ingest is p.imuset.primary
+    assert p.imuset.wanted == (0, 1) and p.imuset.spec == "tactical" and p.imuset.false_alarm == 1e-5
+    seen = []
+
+    class Engine(FakeEngine):
+        def on_imu(self, smp):
+            seen.append(smp)
+
+    p.engine = Engine()
+    for k in range(5):
+        t_us = 10_000_000 + 10_000 * k
+        p.handle(highres_of(t_us, 0, 0.001))
+        p.handle(highres_of(t_us, 1, 0.003))
+    p.handle(highres_of(10_050_000, 2, 0.5))  # not in the set
+    assert p.vehicle_sysid == 1
+    assert p.imuset.counters["other_imu"] == 1
+    assert [s.t for s in seen] == pytest.approx([10.01, 10.02, 10.03, 10.04], abs=1e-9)
+    for s in seen:
+        assert s.gyro[2] == pytest.approx(0.002, abs=1e-9)
+        assert s.accel == pytest.approx((0.0, 0.0, -9.81), abs=1e-6)  # float32 on the wire
+    assert p.imuset.monitor is not None  # the FDI monitor ran on the instants
