@@ -592,3 +592,53 @@ def test_geographic_frame_limit_degrades_the_solution():
     t = align(e, lat=89.4)
     out, t = step(e, t, lat=89.4)
     assert not out.degraded
+
+
+def test_magnetometer_heading_updates_every_tenth_of_a_second():
+    """Typed heading 30 deg (1-sigma 10 deg); the magnetometer says 34 deg (the declination set 4 deg
+    east of the field's); sigma_mag 3 deg: the first update moves the heading by 100/109 of 4 deg,
+    the next, 0.1 s later, by 8.26/17.26 of what is left (P after the first: 100 x 9/109)."""
+    decl = math.degrees(math.atan2(M_N[1], M_N[0])) + 4.0
+    e = aided(aiding=("mag",), declination=decl)
+    t = align(e)
+    yaws = []
+    for _ in range(6):
+        out, t = step(e, t)
+        yaws.append(math.degrees(out.row[9]))
+    first = 30.0 + 4.0 * 100.0 / 109.0
+    assert yaws[0] == pytest.approx(first, abs=0.1)
+    np.testing.assert_allclose(yaws[1:5], yaws[0], rtol=0, atol=2e-3)  # no update in between
+    p1 = 100.0 * 9.0 / 109.0
+    assert yaws[5] - yaws[4] == pytest.approx((34.0 - first) * p1 / (p1 + 9.0), abs=0.03)
+    assert e.filter.counters["mag_accepted"] == 2
+
+
+@pytest.mark.parametrize("mag", [None, (0.0, 0.0, 0.0)])
+def test_no_magnetometer_no_heading_update(mag):
+    e = aided(aiding=("mag",))
+    t = align(e, mag=False)
+    for _ in range(3):
+        s = rest(t, mag=False)
+        out = e.on_imu(ImuSample(s.t, s.gyro, s.accel, mag, 1, 1))
+        t = round(t + DT, 9)
+    assert not e.filter.counters
+
+
+def test_zero_velocity_updates_after_half_a_second_still():
+    e = aided(aiding=("zupt",))
+    t = align(e)
+    _, t = step(e, t)
+    out, t = kick(e, t, (0.1, 0.0, 0.0))  # 5 m/s^2 for 20 ms: moving, then still from the next sample
+    t_still = t
+    assert out.row[4] == pytest.approx(0.1, abs=1e-3)
+    vn = {}
+    while t < t_still + 0.7:
+        out = e.on_imu(rest(t))
+        if out is not None:
+            vn[round(out.row[0] - t_still, 2)] = out.row[4]
+        t = round(t + DT, 9)
+    # still since the first update after the kick (t_still + 0.01); updates start 0.5 s later, every 0.1 s
+    assert vn[0.49] == pytest.approx(0.1, abs=2e-3)
+    # the first ZUPT leaves R/(P + R) of it, P about 0.01 + the level error's g^2 sigma^2 t^2: gain > 0.96
+    assert abs(vn[0.51]) < 0.004
+    assert e.filter.counters["zupt_accepted"] == 2  # at +0.51 and +0.61 s
