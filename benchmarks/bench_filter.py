@@ -300,14 +300,20 @@ def mavins_rows(imu: np.ndarray, gnss: np.ndarray, init: dict, static: Any, repe
     return best, rows  # type: ignore[return-value]
 
 
-def compare(runs: int, repeat: int) -> dict[str, Any]:
-    """Part 1: accuracy and seconds per IMU sample of mavins (two set-ups) and pyins, same seeds."""
+def compare(runs: int, repeat: int, first: int = SEED0) -> dict[str, Any]:
+    """Part 1: accuracy and seconds per IMU sample of mavins (two set-ups) and pyins, seeds first, first + 1, ...
+
+    Also mavins's own heading 1-sigma (sigma_att_d) after SETTLE_S in the
+    head-to-head set-up, pooled as an RMS: the filter's expectation of the
+    heading RMS, against which its error shows whether it is consistent.
+    """
     t = taf()
     traj = trajectory()
     truth = traj.exact.truth
     acc: dict[str, list] = {"mavins": [], "mavins_rest": [], "pyins": []}
     sec: dict[str, list] = {"mavins": [], "mavins_rest": [], "pyins": []}
     n_samples = 0
+    sig2: list[float] = []  # mavins's sigma_att_d^2 after SETTLE_S, head-to-head set-up
     from pyins import filters  # noqa: F401  (import outside the timer)
 
     log("warming pyins (numba JIT of its integrator) and mavins (kernel load)")
@@ -316,7 +322,7 @@ def compare(runs: int, repeat: int) -> dict[str, Any]:
     mavins_rows(imu[:200], same_measurements_gnss(gnss[:1]), init, None, 1)
     mavins_rows(imu[:200], gnss[:1], init, t.STATIC, 1)
     for r in range(runs):
-        seed = SEED0 + r
+        seed = first + r
         imu, gnss, init, _, _ = t.simulate_run(traj, seed)
         n_samples = imu.shape[0]
         idx = 2 * (np.arange(n_samples // 2) + 1)  # output row k: after sample 2k+1 = truth row 2(k+1)
@@ -324,6 +330,8 @@ def compare(runs: int, repeat: int) -> dict[str, Any]:
             s, rows = mavins_rows(imu, g, init, static, repeat)
             e = nav_errors_euler(rows[:, 1], rows[:, 2], rows[:, 3], rows[:, 7:10], truth[idx[: rows.shape[0]]])
             acc[key].append(accuracy(e, rows[:, 0]))
+            if key == "mavins":
+                sig2.extend(np.degrees(rows[rows[:, 0] >= SETTLE_S, 22]) ** 2)
             sec[key].append(s)
         log(f"pyins run {r + 1}/{runs} (seed {seed}), load {load_avg()}")
         s, tr = run_pyins(imu, gnss, init)
@@ -335,7 +343,8 @@ def compare(runs: int, repeat: int) -> dict[str, Any]:
         sec["pyins"].append(s)
         log(f"  seed {seed}: mavins {sec['mavins'][-1]:.3f} s, pyins {s:.1f} s")
     return {"acc": {k: pooled(v) for k, v in acc.items()}, "per_run": {k: [pooled([a]) for a in v] for k, v in acc.items()},
-            "sec": sec, "n": n_samples, "runs": runs}
+            "sec": sec, "n": n_samples, "runs": runs, "first": first,
+            "sigma_yaw": math.sqrt(float(np.mean(sig2)))}
 
 
 def compare_notes(c: dict[str, Any]) -> tuple[list[str], list[dict]]:
@@ -370,7 +379,7 @@ def compare_notes(c: dict[str, Any]) -> tuple[list[str], list[dict]]:
     out.append({"case": "pyins run_feedback_filter (baseline)", "samples": n, "seconds": min(c["sec"]["pyins"]),
                 "rate": 1.0 / per["pyins"], "ratio": 1.0, "baseline": "(is the baseline)"})
     lines = [(f"mavins against pyins, same data: flight 120 s at 100 Hz ({n:,} IMU samples), consumer grade, "
-              f"1 Hz GNSS 1 m; {c['runs']} run(s), seeds {SEED0}..{SEED0 + c['runs'] - 1}, errors pooled over "
+              f"1 Hz GNSS 1 m; {c['runs']} run(s), seeds {c['first']}..{c['first'] + c['runs'] - 1}, errors pooled over "
               f"every output after {SETTLE_S:.0f} s:")]
     lines += table(["quantity", "mavins", "pyins", "mavins/pyins", "target", "", "mavins, tests' rest set-up"], rows)
     lines.append("mavins and pyins: same increments, initial state, GNSS position+velocity and 10 Hz zero-velocity "
@@ -378,10 +387,15 @@ def compare_notes(c: dict[str, Any]) -> tuple[list[str], list[dict]]:
                  "(tests/test_aided_filter.py), which pyins's interface cannot take.")
     pr = c["per_run"]
     lines.append("per run (seed: mavins / pyins): horizontal RMS m "
-                 + ", ".join(f"{SEED0 + i}: {m['h']:.3f}/{p['h']:.3f}" for i, (m, p) in enumerate(zip(pr["mavins"], pr["pyins"])))
+                 + ", ".join(f"{c['first'] + i}: {m['h']:.3f}/{p['h']:.3f}" for i, (m, p) in enumerate(zip(pr["mavins"], pr["pyins"])))
                  + "; heading RMS deg "
-                 + ", ".join(f"{SEED0 + i}: {m['yaw']:.3f}/{p['yaw']:.3f}"
+                 + ", ".join(f"{c['first'] + i}: {m['yaw']:.3f}/{p['yaw']:.3f}"
                              for i, (m, p) in enumerate(zip(pr["mavins"], pr["pyins"]))))
+    d = np.array([m["yaw"] - p["yaw"] for m, p in zip(pr["mavins"], pr["pyins"])])
+    se = float(d.std(ddof=1) / math.sqrt(d.size)) if d.size > 1 else float("nan")
+    lines.append(f"heading, per run: mavins minus pyins RMS {d.mean():+.3f} deg (standard error {se:.3f}), mavins "
+                 f"better in {int(np.sum(d < 0))} of {d.size}; mavins's own heading 1-sigma after {SETTLE_S:.0f} s "
+                 f"(RMS over the runs) {c['sigma_yaw']:.3f} deg against its error {a['mavins']['yaw']:.3f} deg")
     lines.append("seconds: mavins best of the repeats per run, then the best run; pyins one call per run, the best run "
                  "(coning/sculling + run_feedback_filter; building its DataFrames is outside the timer).")
     return lines, out
@@ -781,6 +795,8 @@ def main(argv: Sequence[str] = ()) -> list[dict]:
     p.add_argument("--quick", action="store_true",
                    help="short run: 1 pyins comparison run, 10 Monte Carlo runs, 10 s live, no subprocess rows")
     p.add_argument("--compare-runs", type=int, default=None, help="seeds of the pyins comparison (default 5)")
+    p.add_argument("--compare-first", type=int, default=SEED0,
+                   help=f"first seed of the pyins comparison (default {SEED0})")
     p.add_argument("--runs", type=int, default=None, help="Monte Carlo runs (default 50)")
     p.add_argument("--jobs", type=int, default=None, help="worker processes for the Monte Carlo (default: all cores)")
     p.add_argument("--live-seconds", type=float, default=None, help="sensor seconds of the 1 kHz live record (60)")
@@ -814,7 +830,7 @@ def main(argv: Sequence[str] = ()) -> list[dict]:
     comp = None
     if "compare" not in args.skip:
         log(f"part 1: mavins and pyins on the same data, {compare_runs} run(s)")
-        comp = compare(compare_runs, args.repeat)
+        comp = compare(compare_runs, args.repeat, args.compare_first)
         lines, r = compare_notes(comp)
         NOTES.extend([""] + lines)
         rows.extend(r)
