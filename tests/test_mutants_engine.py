@@ -113,9 +113,15 @@ def test_position_from_options():
 
 def test_gnss_before_navigation_is_the_initial_position():
     e = Engine(cfg(lat=None, lon=None, alt=None))
+    e.take_events()
     e.on_gnss(None, 47.5, 8.25, 500.0, None, 2.0, 4.0, 0.3, "GPS_INPUT")
     assert e.origin == (47.5, 8.25, 500.0)
     assert e._pos_sigma == 2.0
+    assert texts(e) == ["INFO initial position from GPS_INPUT: 47.5000000, 8.2500000, 500.0 m"]
+    e = Engine(cfg(lat=None, lon=None, alt=None))
+    e.take_events()
+    e.on_gnss(None, 47.5, 8.25, 500.0, None, 2.0, 4.0, 0.3)  # the source's default name
+    assert texts(e) == ["INFO initial position from GNSS: 47.5000000, 8.2500000, 500.0 m"]
     e.on_baro(None, 100.0, 0.5)  # not navigating: nothing happens
 
 
@@ -195,9 +201,12 @@ BIAS = (2e-4, -3e-4, 1e-4)  # rad/s: 41, 62, 21 deg/h
 
 def test_gyro_bias_at_rest():
     e = Engine(cfg(heading=30.0))
-    align(e, gyro_bias=BIAS)
+    t = align(e, gyro_bias=BIAS)
     np.testing.assert_allclose(e.gyro_bias, BIAS, rtol=0, atol=1e-12)
     assert "INFO gyro bias estimated at rest: 41.3 -61.9 20.6 deg/h" in texts(e)
+    # published: the body rate with the bias removed, at rest the Earth rate in body axes
+    out, _ = step(e, t, gyro_bias=BIAS)
+    np.testing.assert_allclose(out.gyro, rest(0.0).gyro, rtol=0, atol=1e-12)
     e = Engine(cfg(heading=30.0, gyro_bias="none"))
     align(e, gyro_bias=BIAS)
     np.testing.assert_array_equal(e.gyro_bias, 0.0)
@@ -526,11 +535,13 @@ def test_height_beyond_any_vehicle_is_never_published(alt, diverged):
 def test_non_finite_solution_is_never_published():
     e = aided(aiding=())
     t = align(e)
-    _, t = step(e, t)
-    nan = ImuSample(t, (0.0, 0.0, 0.0), (0.0, math.nan, -9.8), None, 1, 1)
-    assert e.on_imu(nan) is None
-    assert e.on_imu(rest(round(t + DT, 9))) is None
-    assert e.counters["diverged"] == 1 and e.state is State.ALIGNING
+    for n in (1, 2):  # each time counted
+        _, t = step(e, t)
+        nan = ImuSample(t, (0.0, 0.0, 0.0), (0.0, math.nan, -9.8), None, 1, 1)
+        assert e.on_imu(nan) is None
+        assert e.on_imu(rest(round(t + DT, 9))) is None
+        assert e.counters["diverged"] == n and e.state is State.ALIGNING
+        t = align(e, t0=round(t + 2 * DT, 9))
 
 
 def test_restart_while_navigating_starts_the_alignment_over():
