@@ -207,6 +207,9 @@ def test_gyro_bias_at_rest():
     # published: the body rate with the bias removed, at rest the Earth rate in body axes
     out, _ = step(e, t, gyro_bias=BIAS)
     np.testing.assert_allclose(out.gyro, rest(0.0).gyro, rtol=0, atol=1e-12)
+    e = Engine(cfg(heading=30.0))
+    align(e, gyro_bias=(5e-3, 0.0, 0.0))  # 1031.3 deg/h: the conversion to the last digit
+    assert any(x.startswith("INFO gyro bias estimated at rest: 1031.3 ") for x in texts(e))
     e = Engine(cfg(heading=30.0, gyro_bias="none"))
     align(e, gyro_bias=BIAS)
     np.testing.assert_array_equal(e.gyro_bias, 0.0)
@@ -291,6 +294,9 @@ def test_output_rate(rate):
     # one set each time sensor time crosses a multiple of 1/rate, on the first update at or after it
     k = np.floor(np.array([r.row[0] for r in rows]) * rate + 1e-9)
     np.testing.assert_array_equal(np.diff(k), 1.0)
+    if rate != 20.0:  # updates every 20 ms from 1.52 s: each multiple of 1/rate is an update's time
+        times = np.array([r.row[0] for r in rows[1:]])
+        np.testing.assert_allclose(times * rate, np.round(times * rate), rtol=0, atol=1e-6)
 
 
 # -- aided: the filter's measurements through the engine ------------------------------------------
@@ -653,3 +659,54 @@ def test_zero_velocity_updates_after_half_a_second_still():
     # the first ZUPT leaves R/(P + R) of it, P about 0.01 + the level error's g^2 sigma^2 t^2: gain > 0.96
     assert abs(vn[0.51]) < 0.004
     assert e.filter.counters["zupt_accepted"] == 2  # at +0.51 and +0.61 s
+
+
+def test_sampled_rates_start_at_the_last_alignment_sample():
+    """--imu-rates sampled: the sample ending the alignment opens the first interval, so the first
+    update (2 samples) completes 2 samples later, as with averaged rates."""
+    for rates in ("sampled", "averaged"):
+        e = Engine(cfg(heading=30.0, imu_rates=rates))
+        t = align(e)
+        assert t == pytest.approx(1.51, abs=1e-9)  # the alignment ended on the sample at 1.50 s
+        out, t = step(e, t)
+        assert out.row[0] == pytest.approx(1.52, abs=1e-9)
+        np.testing.assert_allclose(out.row[4:7], 0.0, atol=1e-6)
+        out, t = step(e, t)
+        assert out.row[0] == pytest.approx(1.54, abs=1e-9)
+
+
+# consumer grade (docs/simulator.md, model values): gyro random walk, turn-on sigma, Gauss-Markov
+# sigma B / 0.6174; accelerometer turn-on sigma
+ARW, GYRO_ON, GYRO_GM, ACC_ON = 6.981e-5, 5.818e-3, 4.848e-5 / 0.6174, 8.172e-2
+
+
+@pytest.mark.parametrize("heading, vehicle_yaw, sigma_yaw", [
+    (30.0, None, 10.0), ("vehicle", math.radians(30.0), 1.0), ("mag", None, 5.0)])
+def test_initial_attitude_sigma_by_heading_source(heading, vehicle_yaw, sigma_yaw):
+    """docs/filter.md "Tuning": level 1-sigma the accelerometer bias over g, heading by its source
+    (a typed number 10 deg, the vehicle's ATTITUDE 1 deg, the magnetometer 5 deg)."""
+    decl = math.degrees(math.atan2(M_N[1], M_N[0]))
+    e = Engine(cfg(heading=heading, declination=decl, filter=FilterSettings(aiding=())))
+    if vehicle_yaw is not None:
+        e.set_vehicle_yaw(vehicle_yaw)
+    t = align(e)
+    out, t = step(e, t)
+    level = math.degrees(math.atan(ACC_ON / 9.8))
+    np.testing.assert_allclose(np.degrees(out.unc.sigma_att), [level, level, sigma_yaw], rtol=2e-3)
+
+
+@pytest.mark.parametrize("gyro_bias, heading, window", [("estimate", 30.0, 0.5), ("none", 30.0, 0.0),
+                                                        ("estimate", "gyrocompass", 0.0)])
+def test_gyro_bias_sigma_after_the_rest_window(gyro_bias, heading, window):
+    """docs/filter.md "Tuning": after a zero-rate calibration over T = 0.5 s the constant gyro bias
+    1-sigma is ARW/sqrt(T) combined with the Earth rate seen through the heading error (10 deg
+    typed); without one (--gyro-bias none, or a gyrocompass heading, which used the Earth rate) the
+    turn-on sigma. The published sigma adds the Gauss-Markov part."""
+    e = Engine(cfg(heading=heading, gyro_bias=gyro_bias, filter=FilterSettings(aiding=())))
+    t = align(e, gyro_bias=BIAS if gyro_bias == "estimate" and heading != "gyrocompass" else (0.0, 0.0, 0.0))
+    out, t = step(e, t)
+    if window:
+        const = ARW ** 2 / window + (OMEGA * math.radians(10.0)) ** 2
+    else:
+        const = GYRO_ON ** 2
+    np.testing.assert_allclose(out.unc.sigma_gyro, math.sqrt(const + GYRO_GM ** 2), rtol=5e-3)
