@@ -83,7 +83,8 @@ def test_bad_settings_are_refused():
         Engine(cfg(heading="north"))
     with pytest.raises(ValueError, match="gyro_bias must be estimate or none"):
         Engine(cfg(gyro_bias="guess"))
-    with pytest.raises(ValueError, match="--frame wander navigates free inertial only"):
+    with pytest.raises(ValueError, match=r"^--frame wander navigates free inertial only \(the filter works in the "
+                                         r"geographic frame\): add --aiding none$"):
         Engine(cfg(frame="wander", filter=FilterSettings()))
     Engine(cfg(frame="wander"))  # no aiding: fine
     for word in ("auto", "gyrocompass", "mag", "vehicle"):
@@ -710,3 +711,94 @@ def test_gyro_bias_sigma_after_the_rest_window(gyro_bias, heading, window):
     else:
         const = GYRO_ON ** 2
     np.testing.assert_allclose(out.unc.sigma_gyro, math.sqrt(const + GYRO_GM ** 2), rtol=5e-3)
+
+
+Q = 2.0 ** -7  # s: a sample interval exact in binary, so that the gaps below are exact
+
+
+def test_gap_limits_exactly():
+    """A gap of exactly max_gap (1 s) is bridged, exactly restart_gap (60 s) is a long gap, exactly
+    twice the nominal interval is not counted (docs/conventions.md: longer than these)."""
+    e = Engine(cfg(heading=30.0, align=100.0))  # stays aligning
+    t = 1.0
+    for _ in range(5):
+        e.on_imu(rest(t))
+        t += Q
+    t -= Q
+    e.on_imu(rest(t + 2 * Q))  # exactly twice the nominal
+    assert e.counters["gaps_bridged"] == 0
+    t += 2 * Q
+    e.on_imu(rest(t + 1.0))  # exactly max_gap: bridged, not long
+    assert e.counters["gaps_bridged"] == 1 and e.counters["gaps_long"] == 0
+    t += 1.0
+    e.on_imu(rest(t + 60.0))  # exactly restart_gap: long, no restart
+    assert e.counters["gaps_long"] == 1 and e.counters["time_jumps"] == 0 and e.counters["restarts"] == 0
+    t += 60.0
+    e.on_imu(rest(t + 60.5))
+    e.on_imu(rest(t + 121.0))
+    assert e.counters["time_jumps"] == 2 and e.counters["restarts"] == 2  # each counted
+    e.on_imu(rest(t + 121.0 + 3 * Q))
+    e.on_imu(rest(t + 121.0 + 6 * Q))
+    assert e.counters["gaps_bridged"] == 1  # the nominal interval restarted with the restart: 3 Q
+
+
+def test_nominal_interval_follows_the_gaps_slowly():
+    """The nominal interval moves 5 % of the way to each gap up to max_gap (a first-order filter):
+    from 7.8125 ms, gaps of 15 and 15.5 ms are within twice it, one of 20 ms is not; a 1 s gap
+    (bridged) moves it to 57.4 ms, so a 20 ms gap after it is not counted."""
+    e = Engine(cfg(heading=30.0, align=100.0))
+    t = 1.0
+    for _ in range(5):
+        e.on_imu(rest(t))
+        t += Q
+    t -= Q
+    counts = []
+    for gap in (0.015, 0.0155, 0.02):
+        t += gap
+        e.on_imu(rest(t))
+        counts.append(e.counters["gaps_bridged"])
+    assert counts == [0, 0, 1]
+    t += 1.0
+    e.on_imu(rest(t))
+    assert e.counters["gaps_bridged"] == 2  # 1 s: over twice the nominal
+    t += 0.02
+    e.on_imu(rest(t))
+    assert e.counters["gaps_bridged"] == 2
+
+
+def test_motion_limits_exactly():
+    """|w| of exactly motion_gyro (0.1 rad/s) and ||f| - g| of exactly motion_accel (1.5 m/s^2) are
+    still at rest: motion is beyond them."""
+    from mavins.core.earth import gravity  # the engine's reference, to build an exact boundary sample
+
+    g = gravity(math.radians(LAT), ALT)
+    e = Engine(cfg(heading=30.0))
+    t = 1.0
+    for w, f in (((0.0, 0.0, 0.1), (0.0, 0.0, -g)), ((0.0, 0.0, 0.0), (0.0, 0.0, -(g + 1.5))),
+                 ((0.0, 0.0, 0.0), (0.0, 0.0, -(g - 1.5)))):
+        assert abs(math.sqrt(sum(x * x for x in f)) - g) == 1.5 or f[2] == -g
+        e.on_imu(ImuSample(t, w, f, None, 1, 1))
+        t += DT
+    assert e.counters["align_restarts"] == 0
+
+
+def test_long_gap_while_aligning_with_nothing_collected_is_silent():
+    e = Engine(cfg(heading=30.0))
+    e.on_imu(rest(1.0))
+    e.on_imu(ImuSample(1.01, (0.0, 0.0, 0.2), rest(1.01).accel, None, 1, 1))  # motion: nothing collected
+    e.take_events()
+    e.on_imu(rest(3.0))
+    assert e.counters["gaps_long"] == 1 and texts(e) == []
+
+
+def test_long_gap_without_a_nominal_interval_integrates_nothing():
+    """--align 0: aligned on the first sample, so no interval is known yet; the sample after a long
+    gap then covers nothing, and the next ones their own 10 ms."""
+    e = aided(aiding=(), align=0.0)
+    e.on_imu(rest(1.0))
+    assert e.state is State.NAVIGATING
+    assert e.on_imu(moving(3.0, (1.0, 0.0, 0.0))) is None
+    assert e.on_imu(moving(3.01, (1.0, 0.0, 0.0))) is None
+    out = e.on_imu(moving(3.02, (1.0, 0.0, 0.0)))  # 2 samples of 10 ms: the first update
+    assert out is not None and out.degraded and out.row[0] == pytest.approx(3.02, abs=1e-9)
+    assert out.row[4] == pytest.approx(0.02, abs=1e-4)
