@@ -526,7 +526,8 @@ def test_speed_beyond_any_vehicle_is_never_published(dv, diverged):
     np.testing.assert_allclose(out.row[4:7], 0.0, atol=1e-3)
 
 
-@pytest.mark.parametrize("alt, diverged", [(1.001e6, True), (-1.001e6, True), (0.999e6, False)])
+@pytest.mark.parametrize("alt, diverged", [(1.001e6, True), (-1.001e6, True), (0.999e6, False),
+                                            (1e6, False)])  # at rest the first output is at exactly 1e6 m
 def test_height_beyond_any_vehicle_is_never_published(alt, diverged):
     e = aided(aiding=(), alt=alt)
     t = 1.0
