@@ -803,3 +803,46 @@ def test_long_gap_without_a_nominal_interval_integrates_nothing():
     out = e.on_imu(moving(3.02, (1.0, 0.0, 0.0)))  # 2 samples of 10 ms: the first update
     assert out is not None and out.degraded and out.row[0] == pytest.approx(3.02, abs=1e-9)
     assert out.row[4] == pytest.approx(0.02, abs=1e-4)
+
+
+LEVEL = (0.0, 0.0, math.radians(30.0))
+
+
+@pytest.mark.parametrize("case", ["still", "gyro at the limit", "accel at the limit", "accel within, above g"])
+def test_zero_velocity_updates_exactly(case):
+    """On a timeline exact in binary (samples every 2^-7 s, updates every 2^-6 s, zupt_every_s 1/8,
+    zupt_gyro 2^-6 rad/s, zupt_accel 1/8 m/s^2): still from the first update, a zero-velocity
+    update at exactly 0.5 s still and then every 1/8 s. A rate of exactly zupt_gyro or a specific
+    force exactly zupt_accel from gravity is not still. Gravity is the engine's reference at the
+    initial position (latitude and height), so a specific force 0.12 m/s^2 above it is still."""
+    from mavins.core.earth import gravity
+
+    g = gravity(math.radians(LAT), ALT)
+    e = aided(aiding=("zupt",), gyro_bias="none", zupt_gyro=2.0 ** -6, zupt_accel=0.125, zupt_every_s=0.125,
+              rate=64.0)  # an output at each update
+    t = 1.0
+    while e.state is not State.NAVIGATING:
+        e.on_imu(rest(t, att=LEVEL))
+        t += Q
+    w, f = rest(0.0, att=LEVEL).gyro, (0.0, 0.0, -g)
+    if case == "gyro at the limit":
+        w = (0.0, 0.0, 2.0 ** -6)
+    elif case == "accel at the limit":
+        f = (0.0, 0.0, -(g + 0.125))
+        assert math.sqrt(sum(x * x for x in f)) - g == 0.125
+    elif case == "accel within, above g":
+        f = (0.0, 0.0, -(g + 0.12))
+    zupts = []
+    t_first = None
+    for _ in range(2 * 50):
+        out = e.on_imu(ImuSample(t, w, f, None, 1, 1))
+        if out is not None:
+            t_first = out.row[0] if t_first is None else t_first
+            n = e.filter.counters["zupt_accepted"] + e.filter.counters["zupt_rejected"]
+            if n > len(zupts):
+                zupts.append(out.row[0] - t_first)
+        t += Q
+    if case in ("still", "accel within, above g"):
+        assert zupts == [0.5, 0.625, 0.75]
+    else:
+        assert zupts == []
