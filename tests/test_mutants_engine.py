@@ -665,15 +665,19 @@ def test_zero_velocity_updates_after_half_a_second_still():
 
 def test_sampled_rates_start_at_the_last_alignment_sample():
     """--imu-rates sampled: the sample ending the alignment opens the first interval, so the first
-    update (2 samples) completes 2 samples later, as with averaged rates."""
+    update (2 samples) completes 2 samples later, as with averaged rates. A sample of 1 m/s^2 at
+    1.51 s between rest samples: sampled rates are piecewise linear (docs/conventions.md), 0.5 m/s^2
+    on average over each of the two intervals around it: 0.01 m/s; averaged, the mean over
+    1.50-1.51 s: 0.01 m/s as well."""
     for rates in ("sampled", "averaged"):
         e = Engine(cfg(heading=30.0, imu_rates=rates))
         t = align(e)
         assert t == pytest.approx(1.51, abs=1e-9)  # the alignment ended on the sample at 1.50 s
-        out, t = step(e, t)
+        assert e.on_imu(moving(1.51, (1.0, 0.0, 0.0))) is None
+        out = e.on_imu(moving(1.52, (0.0, 0.0, 0.0)))
         assert out.row[0] == pytest.approx(1.52, abs=1e-9)
-        np.testing.assert_allclose(out.row[4:7], 0.0, atol=1e-6)
-        out, t = step(e, t)
+        np.testing.assert_allclose(out.row[4:7], [0.01, 0.0, 0.0], atol=1e-6)
+        out, t = step(e, 1.53)
         assert out.row[0] == pytest.approx(1.54, abs=1e-9)
 
 
