@@ -14,6 +14,7 @@ claiming worse than 50 m is refused) and ICAO Doc 7488 (standard atmosphere).
 from __future__ import annotations
 
 import math
+import numpy as np
 
 import pytest
 
@@ -445,3 +446,99 @@ def test_imus_are_fused_before_the_engine():
         assert s.gyro[2] == pytest.approx(0.002, abs=1e-9)
         assert s.accel == pytest.approx((0.0, 0.0, -9.81), abs=1e-6)  # float32 on the wire
     assert p.imuset.monitor is not None  # the FDI monitor ran on the instants
+
+
+# --- the recording (docs/recording.md): what the pipeline hands to its sink ------------------------
+class FullRecorder(FakeRecorder):
+    def __init__(self):
+        super().__init__()
+        self.outputs, self.filters, self.counters, self.fdi = [], [], [], []
+
+    def on_output(self, row, origin, ned):
+        self.outputs.append((row, origin, tuple(ned)))
+
+    def on_filter(self, t, unc):
+        self.filters.append((t, unc))
+
+    def on_counters(self, t, counters):
+        self.counters.append((t, dict(counters)))
+
+    def on_fdi(self, t, sensor, statistic, threshold, residuals):
+        self.fdi.append((t, sensor, statistic, threshold, residuals))
+
+
+ORIGIN = (47.397742, 8.545594, 505.0)
+
+
+def test_outputs_filter_and_counters_are_recorded():
+    """Each output set: its row, origin and NED offset from the origin (10 m north, 5 m east, 7 m up
+    of it: WGS-84 radii at 47.4 deg; the exact ECEF difference bends by d^2 / 2R < 1e-5 m), the
+    filter's uncertainty when it has one, and the counters (ingest rejections and the engine's
+    non-zero ones) at the 1st, 51st, ... output."""
+    from mavins.core.records import Solution
+
+    a, f = 6378137.0, 1.0 / 298.257223563
+    e2 = f * (2.0 - f)
+    s2 = math.sin(math.radians(ORIGIN[0])) ** 2
+    rm, rn = a * (1.0 - e2) / (1.0 - e2 * s2) ** 1.5, a / math.sqrt(1.0 - e2 * s2)
+    h = ORIGIN[2] + 7.0
+    lat = math.radians(ORIGIN[0]) + 10.0 / (rm + h)
+    lon = math.radians(ORIGIN[1]) + 5.0 / ((rn + h) * math.cos(math.radians(ORIGIN[0])))
+    unc = object()
+    sols = []
+
+    class Engine(FakeEngine):
+        def on_imu(self, smp):
+            if len(sols) == 2:
+                sols.append(None)
+                return None
+            row = np.array([smp.t, lat, lon, h, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0])
+            sols.append(Solution(row, np.zeros(3), ORIGIN, False, unc if len(sols) % 2 == 0 else None))
+            return sols[-1]
+
+    p = pl.Pipeline(EngineConfig())
+    p.engine = Engine()
+    p.engine.counters = {"gaps_bridged": 2, "restarts": 0}
+    p.recorder = FullRecorder()
+    p.handle(highres(1_000_000))
+    p.handle(highres(1_000_000))  # the same time again: rejected by ingest, counted
+    for k in range(1, 53):
+        p.handle(highres(1_000_000 + 10_000 * k))
+    rec = p.recorder
+    out = [s for s in sols if s is not None]
+    assert len(rec.outputs) == len(out) == 52 and len(rec.samples) == 53
+    for (row, origin, ned), s in zip(rec.outputs, out):
+        assert row is s.row and origin == ORIGIN
+        assert ned == pytest.approx((10.0, 5.0, -7.0), abs=1e-4)
+    assert rec.filters == [(s.row[0], unc) for s in out if s.unc is not None]
+    assert len(rec.filters) == 26
+    assert [t for t, _ in rec.counters] == [out[0].row[0], out[50].row[0]]
+    assert rec.counters[0][1] == {"gaps_bridged": 2}  # the duplicate came after the first output
+    assert rec.counters[1][1] == {"rejected_duplicate_time": 1, "gaps_bridged": 2}
+
+
+def test_fdi_tests_are_recorded():
+    """--imus: every window test of the set (time, sensor, statistic, threshold, residuals) reaches
+    the recording as the set reports it."""
+    from mavins.aiding import FilterSettings
+    from mavins.link.ingest import IngestConfig
+
+    p = pl.Pipeline(EngineConfig(filter=FilterSettings(spec="tactical")), IngestConfig(imus=(0, 1)))
+    p.engine = FakeEngine()
+    p.recorder = FullRecorder()
+    reported = []
+    take = p.imuset.take_tests
+
+    def spy():
+        tests = take()
+        reported.extend(tests)
+        return tests
+
+    p.imuset.take_tests = spy
+    for k in range(70):  # at 10 Hz: 0.5 s windows of 5 instants, tested after the 5 s calibration
+        t_us = 10_000_000 + 100_000 * k
+        p.handle(highres_of(t_us, 0, 0.001))
+        p.handle(highres_of(t_us, 1, 0.001))
+    assert reported and p.recorder.fdi == reported
+    sensors = {x[1] for x in reported}
+    assert sensors == {"gyro", "accel"}
