@@ -542,3 +542,34 @@ def test_fdi_tests_are_recorded():
     assert reported and p.recorder.fdi == reported
     sensors = {x[1] for x in reported}
     assert sensors == {"gyro", "accel"}
+
+
+def test_events_are_drained_and_recorded():
+    """take_events: the engine's events, then the IMU set's (--imus all: "fusing IMUs 0, 1" once the
+    1 s discovery is over), each drained once and sent to the recording stamped with the last
+    sample's time (None before any sample)."""
+    from mavins.link.ingest import IngestConfig
+
+    class Recorder(FullRecorder):
+        def __init__(self):
+            super().__init__()
+            self.events = []
+
+        def on_event(self, t, level, text):
+            self.events.append((t, level, text))
+
+    p = pl.Pipeline(EngineConfig(), IngestConfig(imus=()))
+    p.engine = FakeEngine()
+    p.recorder = Recorder()
+    assert p.take_events() == [("INFO", "x"), ]
+    assert p.recorder.events == [(None, "INFO", "x")]
+    for k in range(13):
+        t_us = 10_000_000 + 100_000 * k
+        p.handle(highres_of(t_us, 0, 0.001))
+        p.handle(highres_of(t_us, 1, 0.001))
+    t_last = p.last_sample.t
+    assert p.take_events() == [("INFO", "x"), ("INFO", "fusing IMUs 0, 1")]
+    assert p.recorder.events[1:] == [(t_last, "INFO", "x"), (t_last, "INFO", "fusing IMUs 0, 1")]
+    assert p.take_events() == [("INFO", "x")]  # the set's event was drained
+    p.recorder = None
+    assert p.take_events() == [("INFO", "x")]
