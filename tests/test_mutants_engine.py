@@ -8,7 +8,11 @@ their events (WAITING -> ALIGNING -> NAVIGATING, docs/conventions.md ``--align``
 which heading source is used (``--heading`` degrees or auto/gyrocompass/mag/vehicle),
 the gyro bias taken at rest, the motion and time-gap rules, the output rate, and the
 published solution row (t, lat, lon, h, vn, ve, vd, roll, pitch, yaw, q) after
-alignment.
+alignment. Aided (the filter on): GNSS position/velocity, baro, magnetometer and
+zero-velocity updates moving the solution by the gains worked by hand from the
+initial covariance of docs/filter.md, the gate and its counters, measurements stamped
+ahead, GNSS lost/recovered, the divergence check, restarts, and the limits of the gap,
+motion and still rules taken exactly (binary-exact times and thresholds).
 """
 
 from __future__ import annotations

@@ -9,6 +9,8 @@ DOP x100; HIL_GPS: alt mm, vn/ve/vd cm/s; GPS_INPUT: alt m, speeds m/s, accuraci
 m, ignore_flags bits; GPS_FIX_TYPE 3 = 3D .. 8 = PPP), docs/conventions.md (GNSS
 defaults 2.5 m, 5 m, 0.3 m/s; baro 0.5 m; --geoid-height), docs/filter.md (a fix
 claiming worse than 50 m is refused) and ICAO Doc 7488 (standard atmosphere).
+Also ``--imus`` (two streams fused before the engine) and what the pipeline hands to
+the recording (outputs with their NED offset, filter, counters, FDI tests, events).
 """
 
 from __future__ import annotations
