@@ -21,15 +21,9 @@ import numpy as np
 import pytest
 
 from mavins.core import earth
+from support import A, E2, F, GAMMA_E, K_SOM, M_RATIO, OMEGA
 
-A = 6378137.0
-F = 1.0 / 298.257223563
-E2 = F * (2.0 - F)
-OMEGA = 7.292115e-5
-GM = 3.986004418e14
-GAMMA_E = 9.7803253359
-K_SOM = 0.00193185265241
-M_RATIO = 0.00344978650684
+GM = 3.986004418e14  # the other WGS-84 constants: tests/support.py (typed, never imported from mavins)
 REL = 1e-14
 
 # latitudes that make every term visible (sin^2 L from 0 to 1, both hemispheres) and heights

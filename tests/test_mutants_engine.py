@@ -25,6 +25,8 @@ import pytest
 from mavins.aiding import FilterSettings
 from mavins.core.records import ImuSample
 from mavins.engine import Engine, EngineConfig, State
+from support import cbn as c_bn
+from support import gamma as gamma_rad
 
 LAT, LON, ALT = 47.397742, 8.545594, 488.0
 OMEGA = 7.292115e-5
@@ -34,18 +36,8 @@ DT = 0.01
 
 
 def gamma(lat_deg: float, h: float) -> float:
-    s2 = math.sin(math.radians(lat_deg)) ** 2
-    g = 9.7803253359 * (1.0 + 0.00193185265241 * s2) / math.sqrt(1.0 - E2 * s2)
-    return g * (1.0 - 2.0 / A * (1.0 + F + 0.00344978650684 - 2.0 * F * s2) * h + 3.0 * h * h / (A * A))
-
-
-def c_bn(roll, pitch, yaw) -> np.ndarray:
-    cr, sr, cp, sp, cy, sy = (math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch), math.cos(yaw),
-                              math.sin(yaw))
-    rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1.0]])
-    ry = np.array([[cp, 0, sp], [0, 1.0, 0], [-sp, 0, cp]])
-    rx = np.array([[1.0, 0, 0], [0, cr, -sr], [0, sr, cr]])
-    return rz @ ry @ rx
+    """Normal gravity (m/s^2) at latitude lat_deg (deg), height h (m): tests/support.py's typed WGS-84 form."""
+    return float(gamma_rad(math.radians(lat_deg), h))
 
 
 ATT = (math.radians(3.0), math.radians(-2.0), math.radians(30.0))
