@@ -65,6 +65,7 @@ def run_nav(imu_path: Path, init_path: Path, out_path: Path, opts: NavOptions) -
     t_read = time.perf_counter() - t_start
     t_compute = t_write = 0.0
     rows = 0
+    # the pool is left first: it waits for the writer before atomic_output renames or removes the file
     with files.atomic_output(out_path) as tmp, ThreadPoolExecutor(2, thread_name_prefix="mavins-nav") as pool:
         loading = pool.submit(run, state.copy(), cfg, np.empty(0), np.empty((0, 3)), np.empty((0, 3)),
                               np.empty((1, sd.OUT_SIZE)))  # no rows: only loads (or compiles) the kernel
@@ -111,10 +112,6 @@ def run_nav(imu_path: Path, init_path: Path, out_path: Path, opts: NavOptions) -
                     )
         except OSError as exc:  # the reader turns its own errors into DataFileError: this is the output
             raise files.DataFileError(f"{out_path}: cannot write: {exc.strerror or exc}") from None
-        finally:
-            if writing is not None and not writing.done():
-                writing.cancel()
-                writing.exception()  # never leave the writer running on a file being removed
     t_write += time.perf_counter() - t0  # flush and rename
     if opts.timing:
         print(
