@@ -21,6 +21,7 @@ import numpy as np
 from .core import aided, earth, errmodel, kalman
 from .core import strapdown as sd
 from .core.frames import north_east_error
+from .core.jit import for_frame
 from .core.records import Uncertainty
 
 AIDING_KINDS = ("gnss", "baro", "mag", "zupt")
@@ -137,7 +138,7 @@ class LiveFilter:
     def push(self, s: np.ndarray, cfg: np.ndarray, t: float, w: tuple, f: tuple) -> int:
         """One IMU sample (rad/s, m/s^2, FRD, raw): strapdown plus filter; 1 when an attitude
         update completed (pending measurements whose time it passed are then applied)."""
-        r = aided.push_rate_aided(s, cfg, self.spec, self.P, self.bias, self.acc, self.sums, t,
+        r = for_frame(aided.push_rate_aided, sd.kernel_frame(cfg))(s, cfg, self.spec, self.P, self.bias, self.acc, self.sums, t,
                                   w[0], w[1], w[2], f[0], f[1], f[2], self.predict_every)
         if r == 1:
             tk = sd.state_time(s)
@@ -180,14 +181,16 @@ class LiveFilter:
     def _apply(self, s: np.ndarray, cfg: np.ndarray, t_m: float, kind: str, args: tuple) -> None:
         tk = sd.state_time(s)
         late = max(0.0, tk - t_m)
-        aided.flush_propagation(s, cfg, self.spec, self.P, self.acc)
+        frame = sd.kernel_frame(cfg)
+        for_frame(aided.flush_propagation, frame)(s, cfg, self.spec, self.P, self.acc)
+        position = for_frame(sd.position, frame)
         if kind == "gnss":
             lat, lon, h, vel, sig_h, sig_v, sig_vel = args
-            lat0, lon0, _ = sd.position(s, cfg)
+            lat0, lon0, _ = position(s, cfg)
             ok = self._update(s, cfg, "gnss_pos", ("pos", "hgt"),
                               kalman.gnss_position(s, cfg, lat, lon, h, self.lever, late, sig_h, sig_v))
             if ok:
-                lat1, lon1, _ = sd.position(s, cfg)
+                lat1, lon1, _ = position(s, cfg)
                 if math.hypot(*north_east_error(lat1, lon1, lat0, lon0)) > JUMP_M:
                     self.resets += 1
                 if self.gnss_lost:

@@ -7,7 +7,7 @@
    sim/errors.apply with errors drawn from the same specification (seeded per
    run), through mavins/parallel.py (local cores or a Dask cluster); the
    sample standard deviation of the error against truth at every output time.
-3. Files (CONVENTIONS.md "Error analysis"): covariance.csv, montecarlo.csv,
+3. Files (docs/conventions.md "Error analysis"): covariance.csv, montecarlo.csv,
    budget.csv, plus analysis.rrd (Rerun, record/analysis.py) and analysis.png
    (when matplotlib is installed); written
    together, temp-and-rename, only when everything succeeded.

@@ -134,7 +134,7 @@ def _subparser(sub: argparse._SubParsersAction, name: str, help_text: str, descr
 
 def _add_nav(sub: argparse._SubParsersAction) -> None:
     p = _subparser(sub, "nav", "strapdown solution from IMU files (offline)",
-                   "Integrate an IMU file (increments or rates, CONVENTIONS.md columns) from an initial "
+                   "Integrate an IMU file (increments or rates, docs/conventions.md columns) from an initial "
                    "state and write the navigation solution, one row per attitude update at the time of "
                    "its last sample. Trailing samples that do not fill an update are not used.")
     p.add_argument("imu", type=Path, nargs="+", metavar="IMU.csv",
@@ -480,7 +480,7 @@ def _scenario_error(name: str, exc: Exception) -> str:
 
 
 def _nav_options(p: argparse.ArgumentParser) -> None:
-    """Navigation options shared by run, replay (CONVENTIONS.md ``mavins run``)."""
+    """Navigation options shared by run, replay (docs/conventions.md ``mavins run``)."""
     g = p.add_argument_group("navigation")
     g.add_argument("--lat", type=_real(-90.0, 90.0), metavar="DEG", help="initial latitude (else the vehicle's first good GPS fix)")
     g.add_argument("--lon", type=_real(-180.0, 180.0), metavar="DEG", help="initial longitude")

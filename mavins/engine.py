@@ -18,6 +18,7 @@ import numpy as np
 
 from .core import align, earth
 from .core import strapdown as sd
+from .core.jit import for_frame
 from .core.records import ImuSample, Solution
 from .core.settings import Strapdown, strapdown_of
 from .aiding import FilterSettings, LiveFilter
@@ -279,7 +280,7 @@ class Engine:
         flt.events.clear()
         if not self._output_due(t):
             return None
-        sd.solution_row(s, self._kcfg, self._row)  # type: ignore[arg-type]
+        for_frame(sd.solution_row, sd.kernel_frame(self._kcfg))(s, self._kcfg, self._row)
         r = self._row
         if not np.all(np.isfinite(r)) or abs(r[3]) > MAX_HEIGHT or abs(r[4]) + abs(r[5]) + abs(r[6]) > MAX_SPEED:
             # e.g. hours of extreme input: never publish it, start over

@@ -2,7 +2,7 @@
 
 Every reading error is a :class:`DataFileError` whose message names the file,
 the line and the column, so the command line can print one clear line.
-Floats are written with round-trip precision (CONVENTIONS.md "Files").
+Floats are written with round-trip precision (docs/conventions.md "Files").
 
 Every offline writer goes through :func:`atomic_outputs`: the data goes to a
 temporary file beside the target and is renamed into place only when the
@@ -247,7 +247,7 @@ def check_resources(what: str, *, memory: float = 0.0, disk: float = 0.0, disk_a
 
 @dataclass(frozen=True)
 class InitialState:
-    """Initial state of CONVENTIONS.md: time (s), lat/lon/angles (deg), h (m), NED velocity (m/s)."""
+    """Initial state of docs/conventions.md: time (s), lat/lon/angles (deg), h (m), NED velocity (m/s)."""
 
     t: float
     lat: float
@@ -593,7 +593,7 @@ def read_table(path: str | Path, columns: tuple[str, ...], *, strictly_increasin
 
 
 def read_init(path: str | Path) -> InitialState:
-    """Read and check the initial-state JSON (CONVENTIONS.md "Initial state")."""
+    """Read and check the initial-state JSON (docs/conventions.md "Initial state")."""
     path = Path(path)
     if not path.is_file():
         raise DataFileError(f"{path}: no such file")

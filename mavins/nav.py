@@ -1,4 +1,4 @@
-"""``mavins nav``: the strapdown solution from files (CONVENTIONS.md "Command line")."""
+"""``mavins nav``: the strapdown solution from files (docs/conventions.md "Command line")."""
 
 from __future__ import annotations
 

@@ -106,7 +106,7 @@ def warm_up(engine_cfg: EngineConfig, pub: publish.PublishConfig) -> float:
         code = "from mavins.aiding import warm_measurements; warm_measurements()"
         helper = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         kcfg = sd.make_config(**strapdown_of(engine_cfg).keywords())
-        sd.push_rate_scalars(rest_state(), kcfg, 0.01, 0.0, 0.0, 0.0, 0.0, 0.0, -9.8)
+        jit.for_frame(sd.push_rate_scalars, sd.kernel_frame(kcfg))(rest_state(), kcfg, 0.01, 0.0, 0.0, 0.0, 0.0, 0.0, -9.8)
     cfg = dataclasses.replace(engine_cfg, lat=45.0, lon=7.0, alt=100.0, heading=0.0, align=0.05,
                               rate=max(engine_cfg.rate, 1.0))
     pipe = Pipeline(cfg, IngestConfig(message="HIGHRES_IMU"), own_component=-1)

@@ -40,14 +40,14 @@ DEG_H = math.degrees(1.0) * 3600.0
 
 
 def _dcm_coeffs(order: int, s2: float) -> tuple[float, float]:
-    """(a1, a2) of CONVENTIONS.md --order for the DCM update."""
+    """(a1, a2) of docs/conventions.md --order for the DCM update."""
     a1 = 1.0 if order <= 2 else 1.0 - s2 / 6.0
     a2 = (0.0, 0.5, 0.5, 0.5 - s2 / 24.0)[order - 1]
     return a1, a2
 
 
 def _quat_coeffs(order: int, s2: float) -> tuple[float, float]:
-    """(a_c, a_s) of CONVENTIONS.md --order for the quaternion update."""
+    """(a_c, a_s) of docs/conventions.md --order for the quaternion update."""
     ac = (1.0, 1.0 - s2 / 8.0, 1.0 - s2 / 8.0, 1.0 - s2 / 8.0 + s2 * s2 / 384.0)[order - 1]
     as_ = (0.5, 0.5, 0.5 - s2 / 48.0, 0.5 - s2 / 48.0)[order - 1]
     return ac, as_

@@ -7,7 +7,7 @@ draws its noise from its own numpy Generator seeded from the run's seed
 error streams of sim/errors.py), so a run and its aiding data are
 reproducible and independent.
 
-Files (CONVENTIONS.md "Aided navigation"), written beside imu.csv:
+Files (docs/conventions.md "Aided navigation"), written beside imu.csv:
 
 * ``gnss.csv``: ``t,lat,lon,h,vn,ve,vd,sigma_h,sigma_v,sigma_vel`` (deg, deg,
   ellipsoidal m; m/s; m, m, m/s): the antenna's position and velocity, with

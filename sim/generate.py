@@ -116,7 +116,7 @@ def extra_names(imus: int) -> tuple[str, ...]:
 
 
 def write(run: SimRun, outdir: Path, aiding: Aiding | None = None) -> list[Path]:
-    """Write imu.csv, imu_rates.csv, truth.csv and init.json (CONVENTIONS.md) into outdir.
+    """Write imu.csv, imu_rates.csv, truth.csv and init.json (docs/conventions.md) into outdir.
 
     With extra IMUs also imu1.csv, imu2.csv (increments, the rows of imu.csv). With ``aiding``
     (sim.aiding.simulate_aiding) also gnss.csv, baro.csv, mag.csv (those it holds).

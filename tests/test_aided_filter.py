@@ -52,6 +52,7 @@ from mavins.core import earth
 from mavins.core import errmodel as em
 from mavins.core import kalman as kf
 from mavins.core import strapdown as sd
+from mavins.core.jit import for_frame
 from mavins.core.rotation import dcm_to_euler, euler_to_dcm, quat_to_dcm, rotvec_to_dcm
 from sim import aiding, errors
 from sim.generate import generate
@@ -550,12 +551,12 @@ def inject(s: np.ndarray, cfg: np.ndarray, dx: np.ndarray) -> np.ndarray:
                                 (c[1, 0] - c[0, 1]) / (4 * w)]
     out[sd.S_V : sd.S_V + 3] += dx[3:6]
     out[sd.S_VP : sd.S_VP + 3] += dx[3:6]
-    lat, lon, h = sd.position(s, cfg)
+    lat, lon, h = for_frame(sd.position, sd.GEOGRAPHIC)(s, cfg)
     r_n, r_e = earth.radii(lat)
     out[sd.S_CNE : sd.S_CNE + 9] = earth.cne_from_latlon(lat + dx[6] / (r_n + h),
                                                           lon + dx[7] / ((r_e + h) * math.cos(lat))).ravel()
     out[sd.S_H] = h - dx[8]
-    sd.sync_position(out, cfg)
+    for_frame(sd.sync_position, sd.GEOGRAPHIC)(out, cfg)
     return out
 
 
@@ -584,8 +585,8 @@ def test_feedback_removes_an_injected_error() -> None:
     np.testing.assert_allclose(s[sd.S_VP : sd.S_VP + 3], ref[sd.S_VP : sd.S_VP + 3], atol=1e-14)
     np.testing.assert_allclose(quat_to_dcm(s[sd.S_Q : sd.S_Q + 4]).ravel(), s[sd.S_C : sd.S_C + 9], atol=1e-15)
     assert abs(np.linalg.norm(s[sd.S_Q : sd.S_Q + 4]) - 1.0) < 1e-15
-    lat, lon, h = sd.position(s, CFG)
-    lr, lo, hr = sd.position(ref, CFG)
+    lat, lon, h = for_frame(sd.position, sd.GEOGRAPHIC)(s, CFG)
+    lr, lo, hr = for_frame(sd.position, sd.GEOGRAPHIC)(ref, CFG)
     # the transport-rotation step and the lat/lon offsets differ at second order: dp^2 tan L / R ~ 3e-5 m
     assert abs(lat - lr) * 6.4e6 < 1e-4 and abs(lon - lo) * 4.3e6 < 1e-4 and abs(h - hr) < 1e-12
     np.testing.assert_allclose(bias[0:3], -dx[em.X_BG : em.X_BG + 3], rtol=1e-15)
@@ -654,7 +655,7 @@ def test_late_fix_moves_the_solution_back_along_the_velocity() -> None:
     """A fix dt seconds old is compared with p - v dt: the same innovation as a current fix of p_m + v dt."""
     s = moving_state()
     lever = np.zeros(3)
-    lat, lon, h = sd.position(s, CFG)
+    lat, lon, h = for_frame(sd.position, sd.GEOGRAPHIC)(s, CFG)
     nu_late, H, _ = kf.gnss_position(s, CFG, lat, lon, h, lever, 0.01, 1.0, 1.0)
     np.testing.assert_allclose(nu_late, -0.01 * s[sd.S_V : sd.S_V + 3], atol=1e-9)
     np.testing.assert_allclose(H[:, em.X_DV : em.X_DV + 3], -0.01 * np.eye(3))

@@ -1,7 +1,7 @@
 """Error analysis (`mavins analyze`, core/covariance.py, mavins/analysis.py) against closed forms.
 
 Free-inertial error propagation at rest on the equator (L = 0), level, heading
-north, vertical channel held (CONVENTIONS.md ``--vertical hold``). With the
+north, vertical channel held (docs/conventions.md ``--vertical hold``). With the
 error model of core/errmodel.py (Groves 2nd ed. 14.2.4) the north channel is,
 with x = north position error, phi_E, phi_D the attitude errors,
 ``w_s^2 = g / (R_N + h)`` and Omega the Earth rate (horizontal at L = 0):
@@ -69,7 +69,7 @@ A_WGS = 6378137.0
 F_WGS = 1.0 / 298.257223563
 E2 = F_WGS * (2.0 - F_WGS)
 OMEGA = 7.292115e-5
-G_EQ = 9.7803253359  # normal gravity at the equator, h = 0 (CONVENTIONS.md)
+G_EQ = 9.7803253359  # normal gravity at the equator, h = 0 (docs/conventions.md)
 R_N_EQ = A_WGS * (1.0 - E2)  # meridian radius at the equator
 MG = 9.80665e-3
 DEG_PER_H = math.pi / 180.0 / 3600.0
@@ -82,7 +82,7 @@ class AtRest:
     """Exact increments and truth at rest on the equator, level, heading north (closed form).
 
     ``w_ib^b = C_n^b w_ie^n = [Omega, 0, 0]`` and ``f^b = -g^n = [0, 0, -gamma]``
-    (CONVENTIONS.md Earth model: plumb-bob gravity, so at rest f = -g); the
+    (docs/conventions.md Earth model: plumb-bob gravity, so at rest f = -g); the
     truth never changes. The same numbers as the simulator's ``static``
     segment there, without its 100 Hz internal integration of four hours.
     """

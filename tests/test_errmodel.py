@@ -31,6 +31,7 @@ import pytest
 from mavins.core import earth
 from mavins.core import errmodel as em
 from mavins.core import strapdown as sd
+from mavins.core.jit import for_frame
 from mavins.core.rotation import dcm_to_euler, dcm_to_rotvec, euler_to_dcm, rotvec_to_dcm
 from sim import errors
 from sim.generate import generate
@@ -44,7 +45,7 @@ E2 = F_WGS * (2.0 - F_WGS)
 
 
 def gamma_h(lat: float, h: float) -> float:
-    """Normal gravity of CONVENTIONS.md, written out again."""
+    """Normal gravity of docs/conventions.md, written out again."""
     s2 = math.sin(lat) ** 2
     g = 9.7803253359 * (1 + 0.00193185265241 * s2) / math.sqrt(1 - E2 * s2)
     return g * (1 - 2 / A_WGS * (1 + F_WGS + 0.00344978650684 - 2 * F_WGS * s2) * h + 3 * h * h / A_WGS**2)
@@ -85,8 +86,8 @@ def state_error(sp: np.ndarray, sr: np.ndarray) -> np.ndarray:
     """(phi, dv, dp) of state sp against the reference sr."""
     cp = sp[sd.S_C : sd.S_C + 9].reshape(3, 3)
     cr = sr[sd.S_C : sd.S_C + 9].reshape(3, 3)
-    lp, op, hp = sd.position(sp, CFG)
-    lr, orr, hr = sd.position(sr, CFG)
+    lp, op, hp = for_frame(sd.position, sd.GEOGRAPHIC)(sp, CFG)
+    lr, orr, hr = for_frame(sd.position, sd.GEOGRAPHIC)(sr, CFG)
     r_n, r_e = earth.radii(lr)
     dp = [(lp - lr) * (r_n + hr), (op - orr) * (r_e + hr) * math.cos(lr), -(hp - hr)]
     return np.concatenate([dcm_to_rotvec(cp @ cr.T), sp[sd.S_V : sd.S_V + 3] - sr[sd.S_V : sd.S_V + 3], dp])
@@ -110,13 +111,13 @@ def run_strapdown(exact, j: int, n: int, dx: np.ndarray, transitions: list | Non
         dt = t_all[i + 1] - t_all[i]
         dv = exact.dv[i] + ba * dt
         dv_sum += dv
-        if sd.push_increment(s, CFG, exact.t[i], exact.dtheta[i] + bg * dt, dv) == 1:
+        if for_frame(sd.push_increment, sd.GEOGRAPHIC)(s, CFG, exact.t[i], exact.dtheta[i] + bg * dt, dv) == 1:
             if transitions is not None:
                 c_new = s[sd.S_C : sd.S_C + 9].reshape(3, 3).copy()
                 v_new = s[sd.S_V : sd.S_V + 3].copy()
                 T = s[sd.S_T] - t_old
                 c_mid = 0.5 * (c_old + c_new)
-                lat, _, h = sd.position(s, CFG)
+                lat, _, h = for_frame(sd.position, sd.GEOGRAPHIC)(s, CFG)
                 F = em.system_matrix(c_mid, 0.5 * (v_old + v_new), lat, h, c_mid @ dv_sum / T, SPEC, True)
                 transitions.append(em.transition(F, T))
                 c_old, v_old, t_old = c_new, v_new, s[sd.S_T]

@@ -768,7 +768,7 @@ def test_flood_service_stays_up_and_recovers(flood: FloodRun) -> None:
 
 
 def test_flood_output_stays_on_sensor_time(flood: FloodRun) -> None:
-    """--rate is a rate of sensor time (CONVENTIONS.md): whatever is shed, every output set is stamped with
+    """--rate is a rate of sensor time (docs/conventions.md): whatever is shed, every output set is stamped with
     the time of a sample that was sent, no 1/rate period gets two sets, time never runs backwards, and
     once the overload is over the sets come one per period again (the fixture waits for that)."""
     fr = flood

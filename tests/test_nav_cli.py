@@ -1,6 +1,6 @@
 """``mavins nav`` end to end: the real console script in a subprocess, on files in tmp_path.
 
-Checks the command-line contract of CONVENTIONS.md ("Files" and "Command
+Checks the command-line contract of docs/conventions.md ("Files" and "Command
 line" -> ``mavins nav``): output columns and rows, round-trip values equal bit
 for bit to the in-process :func:`mavins.core.runner.navigate`, every option,
 and clean one-line errors (exit 2, no traceback) for unusable input.

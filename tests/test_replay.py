@@ -4,7 +4,7 @@
    UDP stream from the simulator (a subprocess, paced); ``mavins replay X.tlog
    -o replay.csv`` with the same navigation options must write the same file,
    byte for byte: the service navigates on sensor time only, and the tlog keeps
-   every message it handled, in order (CONVENTIONS.md "MAVLink").
+   every message it handled, in order (docs/conventions.md "MAVLink").
 2. Real data. ``data/px4-sample/sample.ulg`` (PX4, hand-moved board, then at
    rest; data/README.md) replayed with the position given (the log has no GPS),
    ``--align 2`` (the board rests only for the first 2.2 s) and ``--heading`` =

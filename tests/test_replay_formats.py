@@ -37,7 +37,7 @@ def write_dataflash(path: Path, t: np.ndarray, gyro: list[np.ndarray], accel: li
 
 def assert_crossings(t: np.ndarray, rate: float, t_end: float) -> None:
     """Output sets: the first update after alignment, then one each time sensor time crosses
-    a multiple of 1/rate (CONVENTIONS.md --rate), up to the end of the log."""
+    a multiple of 1/rate (docs/conventions.md --rate), up to the end of the log."""
     k = np.floor(t * rate + 1e-9)
     assert np.all(np.diff(k) == 1), np.diff(k)
     assert t_end - t[-1] < 1.0 / rate

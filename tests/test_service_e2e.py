@@ -22,7 +22,7 @@
   ``lat_int``/``lon_int`` (1e-7 deg, about 1 cm); its float32 ``lat``/``lon``
   would only resolve about 0.4 m.
 * The service's output is checked against that truth and against the contract
-  (CONVENTIONS.md "MAVLink", docs/service.md): identity, stamps, frames, origin,
+  (docs/conventions.md "MAVLink", docs/service.md): identity, stamps, frames, origin,
   AMSL altitude, STATUSTEXT states, and the numbers themselves.
 
 Limits, derived from the scenario (``flight``, grade ``ideal``, 250 Hz):

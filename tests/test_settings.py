@@ -57,3 +57,23 @@ def test_options_map_to_settings() -> None:
     assert got.coning is False
     assert got.earth_model == "wgs84"
     assert {s.dest for s in settings.SETTINGS} >= {"no_coning", "earth", "samples", "imu_rates", "l_every"}
+
+
+# One value outside each setting's allowed set (the contract's option list), and one inside it.
+_BAD = {"samples": (0, 7), "attitude": ("euler",), "order": (5, "0"), "earth_model": ("wgs72",),
+        "orthonormalize_every": (-1,), "vertical": ("climb",), "position": ("euler",), "l_every": (0,),
+        "imu_rates": ("raw",), "frame": ("ned",)}
+_GOOD = {"samples": (1, 6), "order": (2, "exact"), "orthonormalize_every": (0,), "l_every": (7,)}
+
+
+@pytest.mark.parametrize("name", sorted(_BAD))
+def test_make_config_refuses_each_value_outside_the_setting(name: str) -> None:
+    for value in _BAD[name]:
+        with pytest.raises(ValueError, match=f"^{name} must be"):
+            sd.make_config(**{name: value})
+    for value in _GOOD.get(name, ()):
+        sd.make_config(**{name: value})
+
+
+def test_every_setting_is_checked() -> None:
+    assert set(_BAD) | {"coning"} == {s.name for s in settings.SETTINGS}

@@ -46,7 +46,7 @@ from support import quat_angle
 
 LAT, LON, H = 47.397742, 8.545594, 488.0
 
-# --- WGS-84 of CONVENTIONS.md, written out again (independent of mavins.core.earth) --
+# --- WGS-84 of docs/conventions.md, written out again (independent of mavins.core.earth) --
 
 A_WGS = 6378137.0
 F_WGS = 1.0 / 298.257223563

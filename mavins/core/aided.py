@@ -44,10 +44,12 @@ import math
 from typing import Any, Mapping, Sequence
 
 import numpy as np
+from numba import literally
 
 from . import errmodel as em
 from . import kalman as kf
 from . import strapdown as sd
+from .strapdown import GEOGRAPHIC
 from .errmodel import NX
 from .jit import kernel
 from .runner import initial_state
@@ -78,7 +80,7 @@ FILTER_COLUMNS = (
 OUT_COLUMNS = sd.OUT_COLUMNS + FILTER_COLUMNS
 OUT_SIZE = len(OUT_COLUMNS)  # 35: the contract's 14 solution and 21 filter columns
 
-DEFAULT_SIGMA_H = 2.5  # m (CONVENTIONS.md GNSS file)
+DEFAULT_SIGMA_H = 2.5  # m (docs/conventions.md GNSS file)
 DEFAULT_SIGMA_V = 5.0  # m
 DEFAULT_SIGMA_VEL = 0.3  # m/s
 DEFAULT_SIGMA_BARO = 0.5  # m
@@ -88,8 +90,9 @@ _DEG_H = math.degrees(1.0) * 3600.0  # rad/s -> deg/h
 
 
 @kernel
-def _propagate(s: np.ndarray, cfg: np.ndarray, spec: np.ndarray, P: np.ndarray, acc: np.ndarray) -> None:
+def _propagate(s: np.ndarray, cfg: np.ndarray, spec: np.ndarray, P: np.ndarray, acc: np.ndarray, frame: int) -> None:
     """Propagate P over the pending interval ``acc[12]`` with its mean C (acc[0:9]) and f^n (acc[9:12])."""
+    literally(frame)
     T = acc[12]
     if not T > 0.0:
         return
@@ -98,7 +101,7 @@ def _propagate(s: np.ndarray, cfg: np.ndarray, spec: np.ndarray, P: np.ndarray, 
         for j in range(3):
             c[i, j] = acc[3 * i + j] / T
     f_n = acc[9:12] / T
-    lat, lon, h = sd.position(s, cfg)
+    lat, lon, h = sd.position(s, cfg, frame)
     F = em.system_matrix(c, s[sd.S_V : sd.S_V + 3], lat, h, f_n, spec, cfg[sd.CFG_EARTH] > 0.5)
     phi, qd = em.discretise(F, spec, T)
     kf.predict(P, phi, qd)
@@ -107,14 +110,16 @@ def _propagate(s: np.ndarray, cfg: np.ndarray, spec: np.ndarray, P: np.ndarray, 
 
 
 @kernel
-def flush_propagation(s: np.ndarray, cfg: np.ndarray, spec: np.ndarray, P: np.ndarray, acc: np.ndarray) -> None:
+def flush_propagation(s: np.ndarray, cfg: np.ndarray, spec: np.ndarray, P: np.ndarray, acc: np.ndarray,
+                      frame: int) -> None:
     """Propagate P over what has accumulated since the last propagation (before an update)."""
-    _propagate(s, cfg, spec, P, acc)
+    literally(frame)
+    _propagate(s, cfg, spec, P, acc, frame)
 
 
 @kernel
 def after_k_update(s: np.ndarray, cfg: np.ndarray, spec: np.ndarray, P: np.ndarray, bias: np.ndarray,
-                   acc: np.ndarray, sums: np.ndarray, predict_every: int) -> float:
+                   acc: np.ndarray, sums: np.ndarray, predict_every: int, frame: int) -> float:
     """The filter's share of one attitude (k) update, shared by the batch and the live paths.
 
     ``sums`` holds the bias-corrected angle (0:3, rad) and velocity (3:6, m/s)
@@ -123,8 +128,9 @@ def after_k_update(s: np.ndarray, cfg: np.ndarray, spec: np.ndarray, P: np.ndarr
     accumulated in ``acc`` for the next propagation, and reset. The
     Gauss-Markov bias estimates decay over the interval (their expected value,
     errmodel.py), and P is propagated every ``predict_every`` updates.
-    Returns the interval T (s).
+    Returns the interval T (s). ``frame`` is strapdown.kernel_frame of cfg.
     """
+    literally(frame)
     tk = s[sd.S_T]
     T = tk - sums[6]
     sums[6] = tk
@@ -145,23 +151,24 @@ def after_k_update(s: np.ndarray, cfg: np.ndarray, spec: np.ndarray, P: np.ndarr
         for a in range(3):
             bias[kf.B_GA + a] *= e
     if int(s[sd.S_NK]) % predict_every == 0:
-        _propagate(s, cfg, spec, P, acc)
+        _propagate(s, cfg, spec, P, acc, frame)
     return T
 
 
 @kernel
 def push_rate_aided(s: np.ndarray, cfg: np.ndarray, spec: np.ndarray, P: np.ndarray, bias: np.ndarray,
                     acc: np.ndarray, sums: np.ndarray, t: float, wx: float, wy: float, wz: float, fx: float,
-                    fy: float, fz: float, predict_every: int) -> int:
+                    fy: float, fz: float, predict_every: int, frame: int) -> int:
     """The live path: one rate sample (rad/s, m/s^2, FRD) with the bias estimates subtracted,
     through strapdown.push_rate_scalars, then :func:`after_k_update` when it completed a k
-    update. Same return codes as push_rate_scalars."""
+    update. Same return codes and ``frame`` as push_rate_scalars."""
+    literally(frame)
     dt = t - s[sd.S_TJ]
     bgx, bgy, bgz = bias[kf.B_BG] + bias[kf.B_GG], bias[kf.B_BG + 1] + bias[kf.B_GG + 1], \
         bias[kf.B_BG + 2] + bias[kf.B_GG + 2]
     bax, bay, baz = bias[kf.B_BA] + bias[kf.B_GA], bias[kf.B_BA + 1] + bias[kf.B_GA + 1], \
         bias[kf.B_BA + 2] + bias[kf.B_GA + 2]
-    r = sd.push_rate_scalars(s, cfg, t, wx - bgx, wy - bgy, wz - bgz, fx - bax, fy - bay, fz - baz)
+    r = sd.push_rate_scalars(s, cfg, t, wx - bgx, wy - bgy, wz - bgz, fx - bax, fy - bay, fz - baz, frame)
     if r < 0:
         return r
     if dt > 0.0:
@@ -172,7 +179,7 @@ def push_rate_aided(s: np.ndarray, cfg: np.ndarray, spec: np.ndarray, P: np.ndar
         sums[4] += (fy - bay) * dt
         sums[5] += (fz - baz) * dt
     if r == 1:
-        after_k_update(s, cfg, spec, P, bias, acc, sums, predict_every)
+        after_k_update(s, cfg, spec, P, bias, acc, sums, predict_every, frame)
     return r
 
 
@@ -290,16 +297,16 @@ def run_aided(
             for a in range(3):
                 raw_sum[a] += dtheta[i, a]
             raw_t += dt
-        if sd.push_increment(s, cfg, t[i], dth_c, dv_c) != 1:
+        if sd.push_increment(s, cfg, t[i], dth_c, dv_c, GEOGRAPHIC) != 1:
             continue
         tk = s[sd.S_T]
         T = tk - sums[6]
         for a in range(3):
             w_ib[a] = sums[a] / T
-        after_k_update(s, cfg, spec, P, bias, acc, sums, predict_every)
+        after_k_update(s, cfg, spec, P, bias, acc, sums, predict_every, GEOGRAPHIC)
 
         while ig < gnss.shape[0] and gnss[ig, 0] <= tk:
-            _propagate(s, cfg, spec, P, acc)
+            _propagate(s, cfg, spec, P, acc, GEOGRAPHIC)
             row = gnss[ig]
             late = tk - row[0]
             if np.isfinite(row[1]) and np.isfinite(row[2]) and np.isfinite(row[3]):
@@ -313,14 +320,14 @@ def run_aided(
                 n_log = _record(log, n_log, counts, row[0], K_GNSS_VEL, nu.shape[0], nis, ratio, ok)
             ig += 1
         while ib < baro.shape[0] and baro[ib, 0] <= tk:
-            _propagate(s, cfg, spec, P, acc)
+            _propagate(s, cfg, spec, P, acc, GEOGRAPHIC)
             if np.isfinite(baro[ib, 1]):
                 nu, H, R = kf.baro_height(s, bias, baro[ib, 1], tk - baro[ib, 0], baro[ib, 2])
                 nis, ratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate, kf.ALL)
                 n_log = _record(log, n_log, counts, baro[ib, 0], K_BARO, 1, nis, ratio, ok)
             ib += 1
         while im < mag.shape[0] and mag[im, 0] <= tk:
-            _propagate(s, cfg, spec, P, acc)
+            _propagate(s, cfg, spec, P, acc, GEOGRAPHIC)
             m_b[0], m_b[1], m_b[2] = mag[im, 1], mag[im, 2], mag[im, 3]
             if np.isfinite(m_b[0]) and np.isfinite(m_b[1]) and np.isfinite(m_b[2]):
                 nu, H, R = kf.mag_heading(s, m_b, declination, mag[im, 4])
@@ -329,14 +336,14 @@ def run_aided(
             im += 1
         while iz < static.shape[0] and static[iz, 0] <= tk:
             if tk <= static[iz, 1]:
-                _propagate(s, cfg, spec, P, acc)
+                _propagate(s, cfg, spec, P, acc, GEOGRAPHIC)
                 nu, H, R = kf.zupt(s, static[iz, 2])
                 nis, ratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate, kf.ALL)
                 n_log = _record(log, n_log, counts, tk, K_ZUPT, nu.shape[0], nis, ratio, ok)
             if tk < static[iz, 1]:
                 break
             if raw_t > 0.0:
-                _propagate(s, cfg, spec, P, acc)
+                _propagate(s, cfg, spec, P, acc, GEOGRAPHIC)
                 sig = static[iz, 3]
                 if not sig > 0.0:
                     sig = spec[em.SP_GYRO_ARW] / np.sqrt(raw_t)
@@ -356,14 +363,14 @@ def run_aided(
             iz += 1
 
         row_out = out[n_out]
-        sd.solution_row(s, cfg, row_out[0:14])
+        sd.solution_row(s, cfg, row_out[0:14], GEOGRAPHIC)
         filter_row(P, bias, row_out)
         n_out += 1
         if n_out % p_every == 0:
             j = n_out // p_every - 1
             if j < p_hist.shape[0]:
                 p_hist[j, :, :] = P
-    _propagate(s, cfg, spec, P, acc)  # P at the state's time for a following call
+    _propagate(s, cfg, spec, P, acc, GEOGRAPHIC)  # P at the state's time for a following call
     return n_out, n_log
 
 

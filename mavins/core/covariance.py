@@ -69,7 +69,7 @@ ARCSEC = math.pi / 180.0 / 3600.0
 PPM = 1e-6
 
 ANALYSIS_KEYS = ("gyro_scale", "accel_scale", "gyro_misalignment", "accel_misalignment")
-"""Spec keys of the error analysis beyond errmodel.SPEC_KEYS: ppm and arcsec, 1-sigma (CONVENTIONS.md)."""
+"""Spec keys of the error analysis beyond errmodel.SPEC_KEYS: ppm and arcsec, 1-sigma (docs/conventions.md)."""
 
 SOURCES = (
     "gyro_bias", "gyro_instability", "gyro_rate_random_walk", "gyro_random_walk", "gyro_scale", "gyro_misalignment",
@@ -199,7 +199,7 @@ class TrackMeans:
 
 
 def _quat_to_dcm_rows(q: np.ndarray) -> np.ndarray:
-    """C_b^n (n,3,3) of unit quaternions [w, x, y, z] (Hamilton, CONVENTIONS.md; Groves eq. 2.34)."""
+    """C_b^n (n,3,3) of unit quaternions [w, x, y, z] (Hamilton, docs/conventions.md; Groves eq. 2.34)."""
     w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
     return np.stack([
         np.stack([w * w + x * x - y * y - z * z, 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),

@@ -1,6 +1,6 @@
 """Error model of the strapdown solution in the NED frame (the filter's system model).
 
-Error state (CONVENTIONS.md "Aided navigation"; every error is *estimate minus
+Error state (docs/conventions.md "Aided navigation"; every error is *estimate minus
 truth*)::
 
     x[0:3]   phi   attitude error (rad), C_b^n(true) = (I - [phi x]) C_b^n(est)

@@ -14,10 +14,11 @@ depends on it. ``NUMBA_CACHE_DIR``, when set, is respected as is.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
 from pathlib import Path
-from typing import Callable, TypeVar
+from typing import Any, Callable, TypeVar
 
 import numba
 
@@ -45,3 +46,44 @@ def cache_is_warm() -> bool:
 def kernel(func: F) -> F:
     """Compile ``func`` in nopython mode with the on-disk cache."""
     return numba.njit(cache=True, nogil=True, error_model="numpy")(func)
+
+
+class _FrameBound:
+    """A kernel whose last argument is the mechanisation frame, called from Python with that
+    argument a compile-time constant (see :func:`for_frame`)."""
+
+    __slots__ = ("func", "frame", "_entries")
+
+    def __init__(self, func: Callable, frame: int) -> None:
+        self.func = func
+        self.frame = frame
+        self._entries: dict[tuple, Callable] = {}
+
+    def __call__(self, *args: Any) -> Any:
+        key = tuple(map(type, args))
+        entry = self._entries.get(key)
+        if entry is None:
+            entry = self._entries[key] = _compiled(self.func, args, self.frame)
+        return entry(*args, self.frame)
+
+
+def _compiled(func: Callable, args: tuple, frame: int) -> Callable:
+    """The entry point of ``func`` for the types of ``args`` and the literal ``frame``, from the
+    disk cache when it is there; ``func`` itself when kernels run as plain Python."""
+    if not hasattr(func, "compile"):
+        return func
+    sig = tuple(numba.typeof(a) for a in args) + (numba.types.literal(frame),)
+    return func.compile(sig)
+
+
+@functools.lru_cache(maxsize=None)
+def for_frame(func: Callable, frame: int) -> Callable:
+    """``func(*args, frame)`` as a Python callable with ``frame`` a compile-time constant.
+
+    A kernel that takes the frame through numba's ``literally`` compiles only that frame's
+    branches, but a call from Python with a plain int goes through numba's slow path each time
+    (about 3 ms) before it finds the literal overload. This compiles (or loads) the overload
+    per tuple of Python argument types and then calls it directly. Arrays are taken as the
+    first call's (the state, config and filter vectors are C-contiguous float64 throughout).
+    """
+    return _FrameBound(func, frame)

@@ -4,7 +4,9 @@ The error state ``x`` and its layout are errmodel.py's (estimate minus truth).
 The filter runs closed loop: after every accepted update the estimate is fed
 back into the strapdown state ``s`` (strapdown.py's ``S_*`` layout) and into
 the bias vector ``bias``, and ``x`` is reset to zero, so between updates the
-error-state estimate is always zero and only P is propagated.
+error-state estimate is always zero and only P is propagated. The filter works in
+the geographic frame only (strapdown.GEOGRAPHIC): the engine and ``mavins nav``
+refuse aiding in the other frames.
 
 Bias vector ``bias`` (``B_*``, the filter's nominal bias estimates, subtracted
 from the IMU data): ``[bg_const(3) rad/s, ba_const(3) m/s^2, bg_gm(3),
@@ -16,7 +18,7 @@ Innovations are *predicted minus measured*, ``nu = h(est) - z``, so that
 ``x += K (nu - H x)``, ``K = P H^T S^-1``, ``S = H P H^T + R``, and P takes
 Joseph's form ``(I - K H) P (I - K H)^T + K R K^T``.
 
-Gate (CONVENTIONS.md ``--gate N``): a measurement is rejected when any
+Gate (docs/conventions.md ``--gate N``): a measurement is rejected when any
 component's normalised innovation ``|nu_i - (H x)_i| / sqrt(S_ii)`` exceeds
 N (sigma). The returned test ratio is the largest of them divided by N
 (below 1 passes); the NIS ``nu^T S^-1 nu`` is returned for consistency tests
@@ -37,6 +39,7 @@ import numpy as np
 
 from . import earth
 from . import strapdown as sd
+from .strapdown import GEOGRAPHIC
 from .errmodel import (
     NX,
     SP_ACC_BIAS,
@@ -219,7 +222,7 @@ def feedback(s: np.ndarray, cfg: np.ndarray, bias: np.ndarray, x: np.ndarray) ->
         s[sd.S_V + i] -= x[X_DV + i]
         s[sd.S_VP + i] -= x[X_DV + i]
     if cfg[sd.CFG_EARTH] > 0.5:
-        lat, lon, h = sd.position(s, cfg)
+        lat, lon, h = sd.position(s, cfg, GEOGRAPHIC)
         # the transport rotation of the displacement (-dp_N, -dp_E), as strapdown._position_step moves C_n^e
         xn, xe, xd = earth.transport_rate_s(lat, h, -x[X_DP], -x[X_DP + 1])
         sd._put9(s, sd.S_CNE, mat3_mul_s(sd._get9(s, sd.S_CNE), rotvec_to_dcm_s(xn, xe, xd)))
@@ -227,7 +230,7 @@ def feedback(s: np.ndarray, cfg: np.ndarray, bias: np.ndarray, x: np.ndarray) ->
         for i in range(3):
             s[sd.S_PF + i] -= x[X_DP + i]
     s[sd.S_H] += x[X_DP + 2]
-    sd.sync_position(s, cfg)
+    sd.sync_position(s, cfg, GEOGRAPHIC)
     for i in range(B_SIZE):
         bias[i] -= x[X_BG + i]
     for i in range(x.shape[0]):
@@ -264,7 +267,7 @@ def metres_per_radian(s: np.ndarray, cfg: np.ndarray) -> tuple[float, float]:
     In laboratory mode (earth = none) the start point's, as strapdown.position maps them.
     """
     if cfg[sd.CFG_EARTH] > 0.5:
-        lat, lon, h = sd.position(s, cfg)
+        lat, lon, h = sd.position(s, cfg, GEOGRAPHIC)
     else:
         lat, h = s[sd.S_LAT0], s[sd.S_H0]
     r_n, r_e = earth.radii(lat)
@@ -290,7 +293,7 @@ def gnss_position(
     (``C(est) l - C l = phi x (C l)``). sigma_h per horizontal axis, sigma_v
     vertical (m).
     """
-    lat, lon, h = sd.position(s, cfg)
+    lat, lon, h = sd.position(s, cfg, GEOGRAPHIC)
     mn, me = metres_per_radian(s, cfg)
     c = s[sd.S_C : sd.S_C + 9].reshape(3, 3)
     la = mat_vec(c, lever)
@@ -460,7 +463,7 @@ def zaru(
     c = s[sd.S_C : sd.S_C + 9].reshape(3, 3)
     w_ie = np.zeros(3)
     if cfg[sd.CFG_EARTH] > 0.5:
-        lat, lon, h = sd.position(s, cfg)
+        lat, lon, h = sd.position(s, cfg, GEOGRAPHIC)
         w_ie = earth.earth_rate_n(lat)
     nu = np.empty(3)
     H = np.zeros((3, NX))

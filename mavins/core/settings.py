@@ -28,6 +28,16 @@ class Setting:
         """The option's name as a Python identifier (argparse dest, ``--config`` TOML key)."""
         return self.flag.lstrip("-").replace("-", "_")
 
+    def check(self, value: object) -> None:
+        """Raise ValueError, naming the setting, unless ``value`` is one it allows."""
+        if self.choices is not None and str(value) not in self.choices:
+            raise ValueError(f"{self.name} must be one of {', '.join(self.choices)}, got {value!r}")
+        if self.int_range is not None:
+            lo, hi = self.int_range
+            if not lo <= value <= (value if hi is None else hi):  # type: ignore[operator]
+                allowed = f">= {lo}" if hi is None else f"{lo}..{hi}"
+                raise ValueError(f"{self.name} must be {allowed}, got {value!r}")
+
     @property
     def switch_off(self) -> bool:
         """A ``--no-...`` switch: present means the (default True) setting is False."""

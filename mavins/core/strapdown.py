@@ -46,7 +46,6 @@ from numba import literally
 
 from . import earth
 from .coning import (
-    MAX_SAMPLES,
     nsample_coning,
     nsample_sculling,
     rate_coning,
@@ -70,7 +69,7 @@ from .rotation import (
     rotvec_to_dcm_s,
     rotvec_to_quat_s,
 )
-from .settings import Strapdown
+from .settings import BY_NAME, Strapdown
 
 # --- configuration vector -------------------------------------------------
 CFG_SAMPLES = 0  # N, samples per k cycle (1..6)
@@ -170,27 +169,10 @@ def make_config(
     imu_rates: str = _DEFAULT.imu_rates,
     frame: str = _DEFAULT.frame,
 ) -> np.ndarray:
-    """Build the configuration vector from the settings of core/settings.py (their names and defaults)."""
-    if not 1 <= samples <= MAX_SAMPLES:
-        raise ValueError(f"samples must be 1..{MAX_SAMPLES}, got {samples}")
-    if attitude not in ("quaternion", "dcm"):
-        raise ValueError(f"attitude must be quaternion or dcm, got {attitude!r}")
-    if str(order) not in ORDERS:
-        raise ValueError(f"order must be 1, 2, 3, 4 or exact, got {order!r}")
-    if earth_model not in ("wgs84", "none"):
-        raise ValueError(f"earth must be wgs84 or none, got {earth_model!r}")
-    if orthonormalize_every < 0:
-        raise ValueError("orthonormalize_every must be >= 0")
-    if vertical not in ("free", "hold"):
-        raise ValueError(f"vertical must be free or hold, got {vertical!r}")
-    if position not in POSINT:
-        raise ValueError(f"position must be one of {sorted(POSINT)}, got {position!r}")
-    if l_every < 1:
-        raise ValueError("l_every must be >= 1")
-    if imu_rates not in ("averaged", "sampled"):
-        raise ValueError(f"imu_rates must be averaged or sampled, got {imu_rates!r}")
-    if frame not in FRAMES:
-        raise ValueError(f"frame must be one of {', '.join(FRAMES)}, got {frame!r}")
+    """Build the configuration vector from the settings of core/settings.py (their names, defaults
+    and allowed values)."""
+    for name, value in dict(locals()).items():
+        BY_NAME[name].check(value)
     if frame != "geographic" and earth_model != "wgs84":
         raise ValueError(f"frame {frame!r} needs the WGS-84 Earth (earth_model wgs84)")
     cfg = np.zeros(CFG_SIZE)
@@ -206,6 +188,18 @@ def make_config(
     cfg[CFG_SAMPLED] = 1.0 if imu_rates == "sampled" else 0.0
     cfg[CFG_FRAME] = FRAMES[frame]
     return cfg
+
+
+def kernel_frame(cfg: np.ndarray) -> int:
+    """The ``frame`` argument of the kernels for cfg: GEOGRAPHIC, WANDER (which also runs the
+    free-azimuth frame, its transport rate chosen by cfg) or INERTIAL.
+
+    Kernels take it as a compile-time constant (numba ``literally``), so a run compiles only
+    its own frame's branches; a dispatch on cfg inside a kernel would compile every frame (the
+    first ``mavins nav`` waited twice as long). From Python, call such a kernel through
+    :func:`mavins.core.jit.for_frame`, which compiles it once for that constant."""
+    frame = int(cfg[CFG_FRAME])
+    return frame if frame in (GEOGRAPHIC, INERTIAL) else WANDER
 
 
 @kernel
@@ -265,20 +259,11 @@ def _wander_latlon(s: np.ndarray) -> tuple[float, float, float, float]:
 
 
 @kernel
-def position(s: np.ndarray, cfg: np.ndarray) -> tuple[float, float, float]:
-    """Latitude, longitude (rad) and height (m) of the state."""
-    frame = int(cfg[CFG_FRAME])
-    if frame == GEOGRAPHIC:
-        return _position(s, cfg, GEOGRAPHIC)
-    if frame == INERTIAL:
-        return _position(s, cfg, INERTIAL)
-    return _position(s, cfg, WANDER)
+def position(s: np.ndarray, cfg: np.ndarray, frame: int) -> tuple[float, float, float]:
+    """Latitude, longitude (rad) and height (m) of the state.
 
-
-@kernel
-def _position(s: np.ndarray, cfg: np.ndarray, frame: int) -> tuple[float, float, float]:
-    """:func:`position` compiled for one frame (``frame`` is a compile-time constant, so each
-    frame's kernel holds only its own branch; FREE shares WANDER's)."""
+    ``frame`` is :func:`kernel_frame` of cfg, a compile-time constant: each frame's kernel
+    holds only its own branch (FREE shares WANDER's)."""
     literally(frame)
     if cfg[CFG_EARTH] > 0.5:
         if frame == INERTIAL and s[S_INI] > 0.5:
@@ -299,22 +284,10 @@ def _position(s: np.ndarray, cfg: np.ndarray, frame: int) -> tuple[float, float,
 
 
 @kernel
-def sync_position(s: np.ndarray, cfg: np.ndarray) -> None:
+def sync_position(s: np.ndarray, cfg: np.ndarray, frame: int) -> None:
     """Refresh the latitude/longitude kept beside C_n^e; call after writing C_n^e or h directly."""
-    frame = int(cfg[CFG_FRAME])
-    if frame == GEOGRAPHIC:
-        _sync(s, cfg, GEOGRAPHIC)
-    elif frame == INERTIAL:
-        _sync(s, cfg, INERTIAL)
-    else:
-        _sync(s, cfg, WANDER)
-
-
-@kernel
-def _sync(s: np.ndarray, cfg: np.ndarray, frame: int) -> None:
-    """:func:`sync_position` compiled for one frame (see :func:`_position`)."""
     literally(frame)
-    lat, lon, h = _position(s, cfg, frame)
+    lat, lon, h = position(s, cfg, frame)
     s[S_LATC] = lat
     s[S_LONC] = lon
     if frame == INERTIAL and s[S_INI] > 0.5:
@@ -322,24 +295,12 @@ def _sync(s: np.ndarray, cfg: np.ndarray, frame: int) -> None:
 
 
 @kernel
-def solution_row(s: np.ndarray, cfg: np.ndarray, out: np.ndarray) -> None:
+def solution_row(s: np.ndarray, cfg: np.ndarray, out: np.ndarray, frame: int) -> None:
     """Write ``t,lat,lon,h,vn,ve,vd,roll,pitch,yaw,qw,qx,qy,qz`` (rad) into out.
 
     Every frame reports NED attitude and velocity: in the wander and free-azimuth frames
     ``v^n = Rz(alpha) v^w`` and ``C_b^n = Rz(alpha) C_b^w`` (docs/algorithms.md).
     """
-    frame = int(cfg[CFG_FRAME])
-    if frame == GEOGRAPHIC:
-        _solution_row(s, cfg, out, GEOGRAPHIC)
-    elif frame == INERTIAL:
-        _solution_row(s, cfg, out, INERTIAL)
-    else:
-        _solution_row(s, cfg, out, WANDER)
-
-
-@kernel
-def _solution_row(s: np.ndarray, cfg: np.ndarray, out: np.ndarray, frame: int) -> None:
-    """:func:`solution_row` compiled for one frame (see :func:`_position`)."""
     literally(frame)
     if frame == INERTIAL and s[S_INI] > 0.5:
         _inertial_row(s, out)
@@ -451,7 +412,7 @@ def _inertial_hold(s: np.ndarray, cfg: np.ndarray, vx: float, vy: float, vz: flo
     dh = s[S_H0] - h
     s[S_RI], s[S_RI + 1], s[S_RI + 2] = x + dh * nx, y + dh * ny, z + dh * nz
     dv = -s[S_VD0] - (nx * (vx + earth.OMEGA * y) + ny * (vy - earth.OMEGA * x) + nz * vz)
-    sync_position(s, cfg)
+    sync_position(s, cfg, INERTIAL)
     return vx + dv * nx, vy + dv * ny, vz + dv * nz
 
 
@@ -527,33 +488,16 @@ def skip_to(s: np.ndarray, t: float) -> None:
 
 # --- the k cycle in named steps -------------------------------------------
 @kernel
-def body_update_quat(x: float, y: float, z: float, order: int) -> Quat:
-    """Quaternion of the body rotation vector sigma = (x, y, z), truncated to ``order``.
+def body_update_quat_minus_one(x: float, y: float, z: float, order: int) -> Quat:
+    """Quaternion of the body rotation vector sigma = (x, y, z), truncated to ``order``, minus
+    the identity quaternion: ``(a_c - 1, a_s sigma)``.
 
-    ``r = [a_c, a_s sigma]`` with ``(a_c, a_s)`` = (1, 1/2), (1 - s^2/8, 1/2),
-    (1 - s^2/8, 1/2 - s^2/48), (1 - s^2/8 + s^4/384, 1/2 - s^2/48) for orders
-    1..4 and the exact ``(cos s/2, sin(s/2)/s)`` for order 0 ([TW11] 11.2.1
-    quaternion error analysis and table 11.2; docs/conventions.md ``--order``).
-    """
-    if order == 0:
-        return rotvec_to_quat_s(x, y, z)
-    s2 = x * x + y * y + z * z
-    if order == 1:
-        ac, as_ = 1.0, 0.5
-    elif order == 2:
-        ac, as_ = 1.0 - s2 / 8.0, 0.5
-    elif order == 3:
-        ac, as_ = 1.0 - s2 / 8.0, 0.5 - s2 / 48.0
-    else:
-        ac, as_ = 1.0 - s2 / 8.0 + s2 * s2 / 384.0, 0.5 - s2 / 48.0
-    return ac, as_ * x, as_ * y, as_ * z
-
-
-@kernel
-def _quat_minus_one(x: float, y: float, z: float, order: int) -> Quat:
-    """:func:`body_update_quat` minus the identity quaternion, ``(a_c - 1, a_s sigma)``, with
-    ``a_c - 1`` formed directly (``-k^2 s^2/(1 + cos(s/2))`` for the exact map) rather than as
-    ``cos(s/2) - 1``: the update is then added to q as a small increment (:func:`_attitude_step`)."""
+    ``(a_c, a_s)`` = (1, 1/2), (1 - s^2/8, 1/2), (1 - s^2/8, 1/2 - s^2/48),
+    (1 - s^2/8 + s^4/384, 1/2 - s^2/48) for orders 1..4 and the exact ``(cos s/2,
+    sin(s/2)/s)`` for order 0 ([TW11] 11.2.1 quaternion error analysis and table 11.2;
+    docs/conventions.md ``--order``). ``a_c - 1`` is formed directly (``-k^2 s^2/(1 +
+    cos(s/2))`` for the exact map) rather than as ``cos(s/2) - 1``: the update is then added
+    to q as a small increment (:func:`_attitude_step`)."""
     s2 = x * x + y * y + z * z
     if order == 0:
         if s2 < SMALL_ANGLE * SMALL_ANGLE:  # the series of half_angle_coeffs, less its 1
@@ -773,9 +717,9 @@ def _attitude_step(s: np.ndarray, cfg: np.ndarray, sgx: float, sgy: float, sgz: 
     # the inertial frame (0.4 prad in 1200 s against the same products in extended precision),
     # about a micrometre of position in a quarter Schuler period; this way 100 times less.
     q0, q1, q2, q3 = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
-    d0, d1, d2, d3 = quat_mul_s((q0, q1, q2, q3), _quat_minus_one(sgx, sgy, sgz, order))
+    d0, d1, d2, d3 = quat_mul_s((q0, q1, q2, q3), body_update_quat_minus_one(sgx, sgy, sgz, order))
     q0, q1, q2, q3 = q0 + d0, q1 + d1, q2 + d2, q3 + d3
-    d0, d1, d2, d3 = quat_mul_s(_quat_minus_one(-zx, -zy, -zz, 0), (q0, q1, q2, q3))
+    d0, d1, d2, d3 = quat_mul_s(body_update_quat_minus_one(-zx, -zy, -zz, 0), (q0, q1, q2, q3))
     q0, q1, q2, q3 = q0 + d0, q1 + d1, q2 + d2, q3 + d3
     n2 = q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3
     if abs(n2 - 1.0) > QUAT_NORM_TOL:
@@ -861,7 +805,7 @@ def _position_step(s: np.ndarray, cfg: np.ndarray, frame: int, T: float, vnx: fl
         s[S_PF + 2] = 0.0
     else:
         s[S_H] -= ez * T
-    _sync(s, cfg, frame)
+    sync_position(s, cfg, frame)
     return xn, xe, xd
 
 
@@ -887,25 +831,14 @@ def _first_mid_velocity(s: np.ndarray, cfg: np.ndarray, frame: int, T: float, sg
 
 
 @kernel
-def k_update(s: np.ndarray, cfg: np.ndarray) -> None:
+def k_update(s: np.ndarray, cfg: np.ndarray, frame: int) -> None:
     """One attitude/velocity/position update over the buffered samples (k cycle).
 
     Increments, l-cycle terms, velocity, position, attitude, in that order; all
-    on scalars, so the update allocates nothing. Compiled once per frame (the frame is a
-    compile-time constant of :func:`_k_cycle`), so each frame runs only its own branches.
+    on scalars, so the update allocates nothing. ``frame`` (GEOGRAPHIC, WANDER, which
+    also runs FREE, or INERTIAL) is a compile-time constant, so each frame's kernel
+    runs only its own branches.
     """
-    frame = int(cfg[CFG_FRAME])
-    if frame == GEOGRAPHIC:
-        _k_cycle(s, cfg, GEOGRAPHIC)
-    elif frame == INERTIAL:
-        _k_cycle(s, cfg, INERTIAL)
-    else:
-        _k_cycle(s, cfg, WANDER)
-
-
-@kernel
-def _k_cycle(s: np.ndarray, cfg: np.ndarray, frame: int) -> None:
-    """The k cycle of :func:`k_update` for one frame (GEOGRAPHIC, WANDER, which also runs FREE, or INERTIAL)."""
     literally(frame)
     n = int(s[S_NJ])
     T = s[S_BUFT]
@@ -957,17 +890,18 @@ def _k_cycle(s: np.ndarray, cfg: np.ndarray, frame: int) -> None:
 # --- the j cycle: feeding samples -------------------------------------------
 @kernel
 def push_increment_s(s: np.ndarray, cfg: np.ndarray, t: float, ax: float, ay: float, az: float,
-                     bx: float, by: float, bz: float) -> int:
+                     bx: float, by: float, bz: float, frame: int) -> int:
     """Feed one increment row covering (t_prev, t] (j cycle): angle (ax, ay, az) rad and
-    velocity (bx, by, bz) m/s, FRD.
+    velocity (bx, by, bz) m/s, FRD; ``frame`` is :func:`kernel_frame` of cfg.
 
     Returns 1 when the sample completed a k cycle (a new solution exists),
     0 when it was buffered, -1 when rejected because t is not after the last
     accepted sample.
     """
+    literally(frame)
     r = _buffer(s, cfg, t, ax, ay, az, bx, by, bz)
     if r == 1:
-        k_update(s, cfg)
+        k_update(s, cfg, frame)
     return r
 
 
@@ -993,16 +927,18 @@ def _buffer(s: np.ndarray, cfg: np.ndarray, t: float, ax: float, ay: float, az: 
 
 
 @kernel
-def push_increment(s: np.ndarray, cfg: np.ndarray, t: float, dtheta: np.ndarray, dv: np.ndarray) -> int:
+def push_increment(s: np.ndarray, cfg: np.ndarray, t: float, dtheta: np.ndarray, dv: np.ndarray, frame: int) -> int:
     """:func:`push_increment_s` with the increments as arrays."""
-    return push_increment_s(s, cfg, t, dtheta[0], dtheta[1], dtheta[2], dv[0], dv[1], dv[2])
+    literally(frame)
+    return push_increment_s(s, cfg, t, dtheta[0], dtheta[1], dtheta[2], dv[0], dv[1], dv[2], frame)
 
 
 @kernel
 def push_rate_scalars(
-    s: np.ndarray, cfg: np.ndarray, t: float, wx: float, wy: float, wz: float, fx: float, fy: float, fz: float
+    s: np.ndarray, cfg: np.ndarray, t: float, wx: float, wy: float, wz: float, fx: float, fy: float, fz: float,
+    frame: int
 ) -> int:
-    """Feed one rate sample (rad/s, m/s^2 in FRD); same return codes as push_increment_s.
+    """Feed one rate sample (rad/s, m/s^2 in FRD); same return codes and ``frame`` as push_increment_s.
 
     Averaged rates: ``dtheta = w dt`` exactly. Instantaneous rates: increments
     by the trapezoid rule and the piecewise-linear coning/sculling terms of
@@ -1011,12 +947,13 @@ def push_rate_scalars(
     only opens the first interval, and without one the first sample's values
     hold back to the start (docs/conventions.md "Sensor data").
     """
+    literally(frame)
     t_last = s[S_TJ]
     if cfg[CFG_SAMPLED] < 0.5:
         if not t > t_last:
             return -1
         dt = t - t_last
-        return push_increment_s(s, cfg, t, wx * dt, wy * dt, wz * dt, fx * dt, fy * dt, fz * dt)
+        return push_increment_s(s, cfg, t, wx * dt, wy * dt, wz * dt, fx * dt, fy * dt, fz * dt, frame)
     if s[S_HAVEP] < 0.5:
         if t < t_last:
             return -1
@@ -1050,13 +987,14 @@ def push_rate_scalars(
     s[S_ACCV + 2] += bz
     s[S_PW], s[S_PW + 1], s[S_PW + 2] = wx, wy, wz
     s[S_PFO], s[S_PFO + 1], s[S_PFO + 2] = fx, fy, fz
-    return push_increment_s(s, cfg, t, ax, ay, az, bx, by, bz)
+    return push_increment_s(s, cfg, t, ax, ay, az, bx, by, bz, frame)
 
 
 @kernel
-def push_rate(s: np.ndarray, cfg: np.ndarray, t: float, w: np.ndarray, f: np.ndarray) -> int:
+def push_rate(s: np.ndarray, cfg: np.ndarray, t: float, w: np.ndarray, f: np.ndarray, frame: int) -> int:
     """:func:`push_rate_scalars` with the sample as arrays."""
-    return push_rate_scalars(s, cfg, t, w[0], w[1], w[2], f[0], f[1], f[2])
+    literally(frame)
+    return push_rate_scalars(s, cfg, t, w[0], w[1], w[2], f[0], f[1], f[2], frame)
 
 
 def run_increments(
@@ -1065,13 +1003,9 @@ def run_increments(
     """Batch j/k loop over increment rows; writes one solution row per k update.
 
     ``out`` needs at least ``len(t) // N`` rows; returns the number written.
-    The frame is chosen here, in Python, and reaches the kernel as a compile-time
-    constant, so a run compiles only its own frame's k cycle (a dispatch inside
-    the kernel compiles every frame: the first ``mavins nav`` waited twice as long).
+    The frame reaches the kernel as a compile-time constant (:func:`kernel_frame`).
     """
-    frame = int(cfg[CFG_FRAME])
-    kernel_frame = GEOGRAPHIC if frame == GEOGRAPHIC else INERTIAL if frame == INERTIAL else WANDER
-    return _run_increments(s, cfg, t, dtheta, dv, out, kernel_frame)
+    return _run_increments(s, cfg, t, dtheta, dv, out, kernel_frame(cfg))
 
 
 @kernel
@@ -1082,21 +1016,29 @@ def _run_increments(s: np.ndarray, cfg: np.ndarray, t: np.ndarray, dtheta: np.nd
     m = 0
     for i in range(t.shape[0]):
         if _buffer(s, cfg, t[i], dtheta[i, 0], dtheta[i, 1], dtheta[i, 2], dv[i, 0], dv[i, 1], dv[i, 2]) == 1:
-            _k_cycle(s, cfg, frame)
-            _solution_row(s, cfg, out[m], frame)
+            k_update(s, cfg, frame)
+            solution_row(s, cfg, out[m], frame)
             m += 1
     return m
 
 
-@kernel
 def run_rates(s: np.ndarray, cfg: np.ndarray, t: np.ndarray, w: np.ndarray, f: np.ndarray, out: np.ndarray) -> int:
-    """Batch loop over rate rows (rows before the state's time are skipped)."""
+    """Batch loop over rate rows (rows before the state's time are skipped); the frame as in
+    :func:`run_increments`."""
+    return _run_rates(s, cfg, t, w, f, out, kernel_frame(cfg))
+
+
+@kernel
+def _run_rates(s: np.ndarray, cfg: np.ndarray, t: np.ndarray, w: np.ndarray, f: np.ndarray, out: np.ndarray,
+               frame: int) -> int:
+    """:func:`run_rates` compiled for one frame."""
+    literally(frame)
     m = 0
     t0 = s[S_TJ]
     for i in range(t.shape[0]):
         if t[i] < t0:
             continue
-        if push_rate_scalars(s, cfg, t[i], w[i, 0], w[i, 1], w[i, 2], f[i, 0], f[i, 1], f[i, 2]) == 1:
-            solution_row(s, cfg, out[m])
+        if push_rate_scalars(s, cfg, t[i], w[i, 0], w[i, 1], w[i, 2], f[i, 0], f[i, 1], f[i, 2], frame) == 1:
+            solution_row(s, cfg, out[m], frame)
             m += 1
     return m
