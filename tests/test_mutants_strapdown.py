@@ -156,28 +156,201 @@ def steady_sensors(lat, h, ve, att):
 FRAMES = ["geographic", "wander", "free", "inertial"]
 
 
-def steady_run(frame, lat, ve, att=ATT, n=24, samples=2, bias=0.0, **kw):
+def steady_run(frame, lat, ve, att=ATT, n=24, samples=2, bias=0.0, t0=0.0, state=False, **kw):
     w, f, c = steady_sensors(lat, H0, ve, att)
     f = f + c.T @ np.array([0.0, 0.0, bias])  # a vertical accelerometer error (for --vertical hold)
     cfg = sd.make_config(samples=samples, frame=frame, **kw)
-    s = sd.init_state(0.0, lat, LON0, H0, np.array([0.0, ve, 0.0]), *att)
-    t = DT * np.arange(1, n + 1)
-    return run(cfg, s, t, np.tile(w * DT, (n, 1)), np.tile(f * DT, (n, 1))), c
+    s = sd.init_state(t0, lat, LON0, H0, np.array([0.0, ve, 0.0]), *att)
+    t = t0 + DT * np.arange(1, n + 1)
+    rows = run(cfg, s, t, np.tile(w * DT, (n, 1)), np.tile(f * DT, (n, 1)))
+    return (rows, c, s) if state else (rows, c)
 
 
 # Tolerances: the updates' truncation is third order in the frame's turn per update (< 2e-6 rad,
 # so < 1e-17 relative); what remains is round-off: ~1 ulp of lat (1e-16 rad) and of the
 # velocity (100 m/s: 1.4e-14) per update, ~1 ulp of the attitude per update.
 @pytest.mark.parametrize("frame", FRAMES)
-@pytest.mark.parametrize("lat,ve", [(LAT0, 0.0), (LAT0, 150.0), (math.radians(-33.8), -120.0)])
-def test_steady_flight_along_a_parallel(frame, lat, ve):
-    rows, c = steady_run(frame, lat, ve)
+@pytest.mark.parametrize("lat,ve,t0", [(LAT0, 0.0, 0.0), (LAT0, 150.0, 0.0), (math.radians(-33.8), -120.0, 0.0),
+                                       (LAT0, 150.0, 100.0)])
+def test_steady_flight_along_a_parallel(frame, lat, ve, t0):
+    rows, c = steady_run(frame, lat, ve, t0=t0)
     assert len(rows) == 12
     r_e = radii(lat)[1]
     for k, row in enumerate(rows, 1):
         t = 2 * k * DT
-        check_row(row, t, lat, LON0 + ve * t / ((r_e + H0) * math.cos(lat)), H0, [0.0, ve, 0.0], c,
+        check_row(row, t0 + t, lat, LON0 + ve * t / ((r_e + H0) * math.cos(lat)), H0, [0.0, ve, 0.0], c,
                   pos=2e-15, hm=2e-8, vel=5e-13, att=2e-14)
+
+
+@pytest.mark.parametrize("frame", FRAMES)
+@pytest.mark.parametrize("how", ["run_rates", "push_increment", "push_rate", "sampled"])
+def test_steady_flight_fed_each_way(frame, how):
+    """The same closed form through every entry point: averaged rates (dtheta = w dt exactly), increments and rates
+    pushed one by one, and sampled rates (constant rates: trapezoid exact, every coning and sculling term a cross
+    product of parallel vectors, 0) with a row at the start time."""
+    w, f, c = steady_sensors(LAT0, H0, 150.0, ATT)
+    t0, n = 100.0, 16
+    cfg = sd.make_config(frame=frame, imu_rates="sampled" if how == "sampled" else "averaged")
+    s = sd.init_state(t0, LAT0, LON0, H0, np.array([0.0, 150.0, 0.0]), *ATT)
+    kf = sd.kernel_frame(cfg)
+    t = t0 + DT * np.arange(1, n + 1)
+    rows = []
+    if how in ("run_rates", "sampled"):
+        tt = t if how == "run_rates" else np.concatenate(([t0], t))
+        out = np.full((n, 14), np.nan)
+        rows = out[:sd.run_rates(s, cfg, tt, np.tile(w, (len(tt), 1)), np.tile(f, (len(tt), 1)), out)]
+    else:
+        push = for_frame(sd.push_increment if how == "push_increment" else sd.push_rate, kf)
+        row = np.empty(14)
+        for ti in t:
+            if (push(s, cfg, ti, w * DT, f * DT) if how == "push_increment" else push(s, cfg, ti, w, f)) == 1:
+                for_frame(sd.solution_row, kf)(s, cfg, row)
+                rows.append(row.copy())
+    assert len(rows) == n // 2
+    r_e = radii(LAT0)[1]
+    for k, row in enumerate(rows, 1):
+        t = 2 * k * DT
+        check_row(row, t0 + t, LAT0, LON0 + 150.0 * t / ((r_e + H0) * math.cos(LAT0)), H0, [0.0, 150.0, 0.0], c,
+                  pos=2e-15, hm=2e-8, vel=5e-13, att=2e-14)
+
+
+def kinematics(lat, lon, h, v, t, steps=16):
+    """lat, lon, h after t (s) at constant NED velocity v: lat' = v_N/(R_N + h), lon' = v_E/((R_E + h) cos L),
+    h' = -v_D (docs/conventions.md), integrated by RK4 (error ~ (t/steps)^4, far below round-off)."""
+    def rate(y):
+        r_n, r_e = radii(y[0])
+        return np.array([v[0] / (r_n + y[2]), v[1] / ((r_e + y[2]) * math.cos(y[0])), -v[2]])
+
+    y, dt = np.array([lat, lon, h]), t / steps
+    for _ in range(steps):
+        k1 = rate(y)
+        k2 = rate(y + dt / 2 * k1)
+        k3 = rate(y + dt / 2 * k2)
+        k4 = rate(y + dt * k3)
+        y = y + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return y
+
+
+V_GEN = np.array([60.0, 150.0, -8.0])
+
+
+@pytest.mark.parametrize("frame", FRAMES)
+@pytest.mark.parametrize("vertical", ["free", "hold"])
+def test_constant_velocity_flight(frame, vertical):
+    """North, east and up at once: the sensors of constant NED velocity at the start point (f^n = (2 w_ie + w_en) x v
+    - g, w = C_n^b (w_ie + w_en), held constant) give v = v0 and the position of the kinematics. What the
+    constant sensors miss along the path bounds the error: gravity's height gradient 2 gamma/a |v_D| = 2.5e-5
+    m/s^3 and its latitude gradient 0.052 sin 2L v_N/R_N = 5e-7 m/s^3 (v: 2.6e-5 t^2/2, 5e-8 m/s at 1/16 s), and
+    w_in's change with latitude (< 1e-9 rad/s^2: 2e-12 rad of attitude); lat and lon also to the round-off of
+    C_n^e's elements (1 ulp each per update) and of the reference's 16 steps, 3e-15 rad. --vertical hold: h = h0
+    and v_D = its initial value (docs/conventions.md); the l cycle still places its mid-interval point at h0 - T/2
+    v_D, so the transport rate's radius is |v_D| T/2 off (1e-8 relative)."""
+    lat = LAT0
+    r_n, r_e = radii(lat)
+    w_ie = np.array([OMEGA * math.cos(lat), 0.0, -OMEGA * math.sin(lat)])
+    w_en = np.array([V_GEN[1] / (r_e + H0), -V_GEN[0] / (r_n + H0), -V_GEN[1] * math.tan(lat) / (r_e + H0)])
+    c = cbn(*ATT)
+    f = c.T @ (np.cross(2 * w_ie + w_en, V_GEN) - np.array([0.0, 0.0, float(gamma(lat, H0))]))
+    w = c.T @ (w_ie + w_en)
+    t0, n = 50.0, 8
+    cfg = sd.make_config(frame=frame, vertical=vertical)
+    s = sd.init_state(t0, lat, LON0, H0, V_GEN.copy(), *ATT)
+    rows = run(cfg, s, t0 + DT * np.arange(1, n + 1), np.tile(w * DT, (n, 1)), np.tile(f * DT, (n, 1)))
+    assert len(rows) == 4
+    T = 2 * DT
+    for k, row in enumerate(rows, 1):
+        t = k * T
+        la, lo, h = kinematics(lat, LON0, H0, V_GEN if vertical == "free" else [V_GEN[0], V_GEN[1], 0.0], t)
+        vel = 2.6e-5 * t * t / 2 + 1e-12
+        pos = vel * t / r_n + 3e-15 + (abs(V_GEN[2]) * DT / r_e * abs(lo - LON0) if vertical == "hold" else 0.0)
+        if frame == "inertial" and vertical == "hold":
+            # The inertial frame's hold moves r^i back along the normal by |v_D| T each update and keeps v^i, so
+            # the velocity relative to the Earth, v^i - Omega x r^i, gains Omega cos L |v_D| T east per update
+            # (6.4e-6 m/s here; the local-level frames keep v_E): only what the contract says of hold is checked.
+            assert row[0] == t0 + t and row[3] == pytest.approx(H0, rel=0, abs=2e-9)  # the ulp of |r^i|: 9.3e-10 m
+            assert row[6] == pytest.approx(V_GEN[2], rel=0, abs=2e-13)
+            assert row[5] - V_GEN[1] == pytest.approx(k * OMEGA * math.cos(lat) * abs(V_GEN[2]) * T, rel=1e-3)
+            continue
+        check_row(row, t0 + t, la, lo, h, V_GEN, c, pos=pos, hm=vel * t + 1e-8, vel=vel, att=2e-12)
+
+
+def test_azimuth_of_the_wander_and_free_frames():
+    """At rest the wander frame keeps its azimuth (alpha = 0: no vertical transport rate), the free-azimuth frame
+    does not turn about its vertical in inertial space, so its azimuth from north grows as Omega sin L t
+    ([ZS] 2.2, 2.3). alpha from C_w^e = C_n^e Rz(alpha), third row (cos L cos alpha, -cos L sin alpha, -sin L)."""
+    for frame, rate in (("wander", 0.0), ("free", OMEGA * math.sin(LAT0))):
+        rows, _, s = steady_run(frame, LAT0, 0.0, state=True)
+        c = s[sd.S_CNE:sd.S_CNE + 9]
+        alpha = math.atan2(-c[7], c[6])
+        assert alpha == pytest.approx(rate * 24 * DT, rel=1e-9, abs=1e-17)
+
+
+def cne(lat, lon):
+    """C_n^e of the NED frame at lat, lon ([TW11] 3.4)."""
+    sl, cl, so, co = math.sin(lat), math.cos(lat), math.sin(lon), math.cos(lon)
+    return np.array([[-sl * co, -so, -cl * co], [-sl * so, co, -cl * so], [cl, 0.0, -sl]])
+
+
+@pytest.mark.parametrize("xi", [[1e-3, -2e-3, 5e-4], [0.0099, 0.0, 0.0], [0.0, 0.01, 0.0], [0.3, -0.2, 0.4],
+                                [2.0e-6, 1.5e-6, -1e-6]])
+def test_position_rotation(xi):
+    """C_n^e <- C_n^e exp([xi x]) (docs/conventions.md "Navigation-frame rotation"; Rodrigues), on both sides of the
+    series limit |xi| = 0.01 rad."""
+    s = sd.init_state(0.0, LAT0, LON0, H0, np.zeros(3), 0.0, 0.0, 0.0)
+    c0 = cne(LAT0, LON0)
+    s[sd.S_CNE:sd.S_CNE + 9] = c0.ravel()
+    sd._rotate_position(s, *xi)
+    np.testing.assert_allclose(s[sd.S_CNE:sd.S_CNE + 9], (c0 @ expm(xi)).ravel(), rtol=0, atol=4e-16)
+
+
+def test_wander_frame_exactly_at_a_pole():
+    """Exactly at a pole the wander angle is 0 and the longitude that of w's y axis as east (docs/conventions.md
+    "--frame"): the velocity and attitude are reported as held."""
+    lon = 0.7
+    cfg = sd.make_config(frame="wander")
+    s = sd.init_state(0.0, LAT0, LON0, H0, np.array([1.0, 2.0, 0.5]), *ATT)
+    s[sd.S_CNE:sd.S_CNE + 9] = [-math.cos(lon), -math.sin(lon), 0.0, -math.sin(lon), math.cos(lon), 0.0, 0.0, 0.0,
+                                -1.0]  # cne(90 deg, lon) with cos L exactly 0
+    assert for_frame(sd.position, sd.WANDER)(s, cfg) == (math.pi / 2, pytest.approx(lon, abs=1e-16), H0)
+    row = np.empty(14)
+    for_frame(sd.solution_row, sd.WANDER)(s, cfg, row)
+    check_row(row, 0.0, math.pi / 2, lon, H0, [1.0, 2.0, 0.5], cbn(*ATT), pos=2e-16, hm=0.0, vel=0.0, att=1e-15)
+
+
+@pytest.mark.parametrize("frame", FRAMES)
+def test_reported_at_gimbal_lock(frame):
+    """Pitch exactly 90 deg: roll is reported 0 and yaw as yaw - roll (C_b^n = Rz(y) Ry(90 deg) Rx(r) depends on
+    y - r only); the branch holds within 1e-15 of sin pitch = 1, so the angles to sqrt(2e-15) = 5e-8 rad."""
+    att = (0.3, math.pi / 2, 1.1)
+    rows, _ = steady_run(frame, LAT0, 0.0, att=att, n=2)
+    assert len(rows) == 1
+    assert rows[0][7] == 0.0
+    assert rows[0][8] == pytest.approx(math.pi / 2, abs=5e-8)
+    assert rows[0][9] == pytest.approx(0.8, abs=5e-8)
+
+
+def test_inertial_gravitation():
+    """The inertial frame's gravitation at each l cycle: G = g - Omega^2 [x, y, 0] (plumb gravity less the centrifugal
+    term, [ZS1] eq. 1-3-26) at the mid-interval point, turned into ECI by Omega (t_mid - t0), plus from the third l
+    cycle on (G_l - 2 G_l-1 + G_l-2)/24 (docs/algorithms.md "Mechanisation frames": the midpoint rule's T^2/24 G'').
+    At rest the mid-interval point is r^e itself (to (T/2)^3/12 Omega^3 r = 1e-13 m)."""
+    t0 = 100.0
+    rows, _, s = steady_run("inertial", LAT0, 0.0, n=8, t0=t0, state=True)
+    r_n, r_e = radii(LAT0)
+    sl, cl, so, co = math.sin(LAT0), math.cos(LAT0), math.sin(LON0), math.cos(LON0)
+    x, y = (r_e + H0) * cl * co, (r_e + H0) * cl * so
+    g = float(gamma(LAT0, H0))
+    ge = np.array([-g * cl * co - OMEGA ** 2 * x, -g * cl * so - OMEGA ** 2 * y, -g * sl])
+    T = 2 * DT
+
+    def eci(k):  # the l cycle of update k (1-based): mid-interval time t0 + (k - 1/2) T
+        th = OMEGA * (k - 0.5) * T
+        return np.array([math.cos(th) * ge[0] - math.sin(th) * ge[1], math.sin(th) * ge[0] + math.cos(th) * ge[1],
+                         ge[2]])
+
+    want = eci(4) + (eci(4) - 2 * eci(3) + eci(2)) / 24
+    got = np.array([s[sd.S_GH], s[sd.S_GH + 1], s[sd.S_G]])
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-14)
 
 
 @pytest.mark.parametrize("frame", ["geographic", "inertial"])
@@ -551,13 +724,16 @@ def test_rate_codes():
     assert pushs(s, cfg, 1.0 + DT, 3.0, 0.0, 0.0, *g) == 1
     for_frame(sd.solution_row, sd.GEOGRAPHIC)(s, cfg, row)
     assert row[7] == 2.0 * DT  # (1 + 3)/2 dt
-    assert pushs(s, cfg, 1.0 + DT, 3.0, 0.0, 0.0, *g) == -1
+    assert pushs(s, cfg, 1.0 + DT, 100.0, 0.0, 0.0, *g) == -1  # rejected: the next interval starts from 3
+    assert pushs(s, cfg, 1.0 + 2 * DT, 3.0, 0.0, 0.0, *g) == 1
+    for_frame(sd.solution_row, sd.GEOGRAPHIC)(s, cfg, row)
+    assert row[7] == pytest.approx(5.0 * DT, abs=1e-16)
     sd.skip_to(s, 2.0)
     assert pushs(s, cfg, 2.0, 5.0, 0.0, 0.0, *g) == 0  # opens a fresh interval at the new clock
     assert pushs(s, cfg, 2.0 + DT, 7.0, 0.0, 0.0, *g) == 1
     for_frame(sd.solution_row, sd.GEOGRAPHIC)(s, cfg, row)
-    assert row[7] == pytest.approx(2.0 * DT + 6.0 * DT, abs=1e-16)
-    np.testing.assert_allclose(row[4:7], [0.0, 0.0, 2 * DT * gm], rtol=0, atol=1e-15)
+    assert row[7] == pytest.approx(5.0 * DT + 6.0 * DT, abs=1e-16)
+    np.testing.assert_allclose(row[4:7], [0.0, 0.0, 3 * DT * gm], rtol=0, atol=1e-15)
 
 
 def test_fresh_state_row_and_position():
@@ -612,3 +788,76 @@ def test_clamped_beyond_the_limit(lat):
         t = 2 * k * DT
         assert row[6] == pytest.approx(dg * t, rel=1e-3, abs=1e-14)
         assert np.max(np.abs(wrap(row[7:10] - np.array(ATT)))) < 3e-7 * t + 1e-14
+
+
+def test_velocity_step():
+    """One velocity update as docs/algorithms.md writes it: v(k) = v(k-1) + (I - 1/2 [zeta x] + 1/12 [zeta x]^2 +
+    1/12 [dzeta x]) C_b^n (V + rot(sigma, V) + dv_scul) + [g - (2 w_ie + w_en) x v_mid] T (Savage's frame rotation
+    to second order, [SAV98] part 2), with rates and angles large enough that every term shows: the kernel
+    drops the third-order 1/72 zeta x (dzeta x u), which bounds the difference."""
+    s = sd.init_state(0.0, LAT0, LON0, H0, np.array([12.0, -7.0, 1.5]), *ATT)
+    w_ie, w_en, g = np.array([3e-4, -1e-4, -2e-4]), np.array([1e-4, 2e-4, -3e-4]), 9.81
+    s[sd.S_WIE:sd.S_WIE + 3], s[sd.S_WEN:sd.S_WEN + 3], s[sd.S_G] = w_ie, w_en, g
+    T = 0.25
+    sigma, dv, scul = np.array([0.02, -0.01, 0.03]), np.array([0.4, -0.3, -2.4]), np.array([1e-3, -2e-3, 5e-4])
+    zeta, dzeta, vm = np.array([2e-3, -1e-3, 1.5e-3]), np.array([1e-5, 2e-5, -1e-5]), np.array([13.0, -6.0, 1.0])
+    got = np.array(sd._velocity_step(s, T, *sigma, *dv, *scul, *zeta, *dzeta, *vm))
+    u = cbn(*ATT) @ (dv + savage(sigma, dv) + scul)
+    u = u - 0.5 * np.cross(zeta, u) + np.cross(zeta, np.cross(zeta, u)) / 12 + np.cross(dzeta, u) / 12
+    want = np.array([12.0, -7.0, 1.5]) + u + (np.array([0.0, 0.0, g]) - np.cross(2 * w_ie + w_en, vm)) * T
+    tol = np.linalg.norm(zeta) * np.linalg.norm(dzeta) * np.linalg.norm(u) / 72 + 1e-14
+    np.testing.assert_allclose(got, want, rtol=0, atol=tol)
+
+
+def test_init_state_slots():
+    """A fresh state holds the initial values where the kernels read them (strapdown.py's state layout): time, C_b^n and
+    q_nb of ATT (ZYX), v (also as the update before), C_n^e of lat/lon ([TW11] 3.4), h, the start point, gravity
+    there (Somigliana) and 1/(R_N + h), which places the first update's mid-interval latitude."""
+    v = np.array([3.0, -4.0, 0.5])
+    s = sd.init_state(2.5, LAT0, LON0, H0, v, *ATT)
+    assert s.shape == (132,) and s[sd.S_T] == 2.5 and s[sd.S_TJ] == 2.5
+    c = cbn(*ATT)
+    np.testing.assert_allclose(s[sd.S_C:sd.S_C + 9], c.ravel(), rtol=0, atol=4e-16)
+    np.testing.assert_allclose(dcm_of_quat(s[sd.S_Q:sd.S_Q + 4]), c, rtol=0, atol=1e-15)
+    assert s[sd.S_Q] > 0.0
+    assert list(s[sd.S_V:sd.S_V + 3]) == list(v) and list(s[sd.S_VP:sd.S_VP + 3]) == list(v)
+    np.testing.assert_allclose(s[sd.S_CNE:sd.S_CNE + 9], cne(LAT0, LON0).ravel(), rtol=0, atol=2e-16)
+    assert (s[sd.S_H], s[sd.S_LAT0], s[sd.S_LON0], s[sd.S_H0], s[sd.S_VD0]) == (H0, LAT0, LON0, H0, 0.5)
+    assert (s[sd.S_LATC], s[sd.S_LONC]) == (LAT0, LON0)
+    assert s[sd.S_G0] == pytest.approx(float(gamma(LAT0, H0)), rel=4e-16, abs=0)
+    assert s[sd.S_KN] == pytest.approx(1.0 / (radii(LAT0)[0] + H0), rel=4e-16, abs=0)
+    assert s[sd.S_NK] == 0.0 and s[sd.S_NJ] == 0.0 and s[sd.S_NL] == 0.0 and s[sd.S_INI] == 0.0
+
+
+@pytest.mark.parametrize("frame,l_every", [("geographic", 1), ("geographic", 3), ("wander", 1), ("wander", 3),
+                                           ("free", 1), ("inertial", 1)])
+def test_vertical_flight(frame, l_every):
+    """Climbing straight up at 8 m/s from rest horizontally: f^n = 2 w_ie x v - [0, 0, gamma(h(t))] (w_en = 0), each
+    increment's gravity integrated exactly (Simpson: gamma is quadratic in h, h linear in t), so v, lat, lon stay
+    and h = h0 + 8 t to round-off. With --l-every M gravity is taken at the mid-interval height of the l cycle
+    and held for M updates (docs/conventions.md "Mid-interval terms"): update j then gains (gamma(h_l) -
+    gamma(h_j)) T of v_D, h_j = h0 + 8 (j - 1/2) T its own mid-interval height, l = the update that last ran
+    the l cycle; that v_D error meets the Coriolis term, 2 Omega cos L |dv_D| of v_E per second at most."""
+    vd, n, samples = -8.0, 24, 2
+    c = cbn(*ATT)
+    w_ie = np.array([OMEGA * math.cos(LAT0), 0.0, -OMEGA * math.sin(LAT0)])
+    cor = np.cross(2 * w_ie, [0.0, 0.0, vd])
+    t = DT * np.arange(n + 1)
+    hgt = lambda tt: H0 - vd * tt  # noqa: E731
+    g_int = DT / 6 * (gamma(LAT0, hgt(t[:-1])) + 4 * gamma(LAT0, hgt(t[:-1] + DT / 2)) + gamma(LAT0, hgt(t[1:])))
+    dv = np.array([c.T @ (cor * DT - np.array([0.0, 0.0, gi])) for gi in g_int])
+    cfg = sd.make_config(samples=samples, frame=frame, l_every=l_every)
+    s = sd.init_state(0.0, LAT0, LON0, H0, np.array([0.0, 0.0, vd]), *ATT)
+    rows = run(cfg, s, t[1:], np.tile(c.T @ w_ie * DT, (n, 1)), dv)
+    T = samples * DT
+    vz, h = vd, H0
+    for j, row in enumerate(rows, 1):
+        jl = (j - 1) // l_every * l_every + 1
+        vz_new = vz + float(gamma(LAT0, H0 - vd * (jl - 0.5) * T) - gamma(LAT0, H0 - vd * (j - 0.5) * T)) * T
+        h -= (vz + vz_new) / 2 * T  # trapezoidal rule
+        vz = vz_new
+        # inertial: r^i += v T rounds to the ulp of |r^i| (9.3e-10 m) at each update, and |v^i| (330 m/s) has an
+        # ulp of 5.7e-14 m/s; else ~1 ulp of h and v per update
+        hm, vel = (1e-9 * j, 4e-13) if frame == "inertial" else (1e-10, 2e-14)
+        vel += 2 * OMEGA * math.cos(LAT0) * abs(vz - vd) * j * T
+        check_row(row, j * T, LAT0, LON0, h, [0, 0, vz], c, pos=2e-15, hm=hm, vel=vel, att=2e-14)
