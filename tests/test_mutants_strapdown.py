@@ -234,9 +234,11 @@ def kinematics(lat, lon, h, v, t, steps=16):
 V_GEN = np.array([60.0, 150.0, -8.0])
 
 
-@pytest.mark.parametrize("frame", FRAMES)
+@pytest.mark.parametrize("frame,attitude,alpha", [(f, "quaternion", 0.0) for f in FRAMES] +
+                         [("geographic", "dcm", 0.0), ("inertial", "dcm", 0.0), ("wander", "quaternion", 0.7),
+                          ("free", "dcm", -0.4)])
 @pytest.mark.parametrize("vertical", ["free", "hold"])
-def test_constant_velocity_flight(frame, vertical):
+def test_constant_velocity_flight(frame, vertical, attitude, alpha):
     """North, east and up at once: the sensors of constant NED velocity at the start point (f^n = (2 w_ie + w_en) x v
     - g, w = C_n^b (w_ie + w_en), held constant) give v = v0 and the position of the kinematics. What the
     constant sensors miss along the path bounds the error: gravity's height gradient 2 gamma/a |v_D| = 2.5e-5
@@ -253,10 +255,18 @@ def test_constant_velocity_flight(frame, vertical):
     f = c.T @ (np.cross(2 * w_ie + w_en, V_GEN) - np.array([0.0, 0.0, float(gamma(lat, H0))]))
     w = c.T @ (w_ie + w_en)
     t0, n = 50.0, 8
-    cfg = sd.make_config(frame=frame, vertical=vertical)
+    cfg = sd.make_config(frame=frame, vertical=vertical, attitude=attitude)
     s = sd.init_state(t0, lat, LON0, H0, V_GEN.copy(), *ATT)
+    if alpha:  # an azimuth that has turned: C_w^e = C_n^e Rz(a), v^w = Rz(-a) v^n, C_b^w = Rz(-a) C_b^n
+        rz = np.array([[math.cos(alpha), -math.sin(alpha), 0.0], [math.sin(alpha), math.cos(alpha), 0.0], [0, 0, 1.0]])
+        s[sd.S_CNE:sd.S_CNE + 9] = (cne(lat, LON0) @ rz).ravel()
+        s[sd.S_C:sd.S_C + 9] = (rz.T @ c).ravel()
+        s[sd.S_Q:sd.S_Q + 4] = qmul([math.cos(alpha / 2), 0.0, 0.0, -math.sin(alpha / 2)], s[sd.S_Q:sd.S_Q + 4])
+        s[sd.S_V:sd.S_V + 3] = s[sd.S_VP:sd.S_VP + 3] = rz.T @ V_GEN
     rows = run(cfg, s, t0 + DT * np.arange(1, n + 1), np.tile(w * DT, (n, 1)), np.tile(f * DT, (n, 1)))
     assert len(rows) == 4
+    pos_now = for_frame(sd.position, sd.kernel_frame(cfg))(s, cfg)  # what the filter reads: the last row's
+    assert pos_now == pytest.approx(tuple(rows[-1][1:4]), rel=0, abs=1e-15)
     T = 2 * DT
     for k, row in enumerate(rows, 1):
         t = k * T
@@ -329,13 +339,16 @@ def test_reported_at_gimbal_lock(frame):
     assert rows[0][9] == pytest.approx(0.8, abs=5e-8)
 
 
-def test_inertial_gravitation():
+@pytest.mark.parametrize("m", [1, 2])
+def test_inertial_gravitation(m):
     """The inertial frame's gravitation at each l cycle: G = g - Omega^2 [x, y, 0] (plumb gravity less the centrifugal
     term, [ZS1] eq. 1-3-26) at the mid-interval point, turned into ECI by Omega (t_mid - t0), plus from the third l
-    cycle on (G_l - 2 G_l-1 + G_l-2)/24 (docs/algorithms.md "Mechanisation frames": the midpoint rule's T^2/24 G'').
-    At rest the mid-interval point is r^e itself (to (T/2)^3/12 Omega^3 r = 1e-13 m)."""
+    cycle on (G_l - 2 G_l-1 + G_l-2)/(24 M^2) (docs/algorithms.md "Mechanisation frames": the midpoint rule's T^2/24
+    G''), held for M updates. At rest the mid-interval point is r^e itself (to (T/2)^3/12 Omega^3 r = 1e-13 m)."""
     t0 = 100.0
-    rows, _, s = steady_run("inertial", LAT0, 0.0, n=8, t0=t0, state=True)
+    w, f, c = steady_sensors(LAT0, H0, 0.0, ATT)
+    cfg = sd.make_config(frame="inertial", l_every=m)
+    s = sd.init_state(t0, LAT0, LON0, H0, np.zeros(3), *ATT)
     r_n, r_e = radii(LAT0)
     sl, cl, so, co = math.sin(LAT0), math.cos(LAT0), math.sin(LON0), math.cos(LON0)
     x, y = (r_e + H0) * cl * co, (r_e + H0) * cl * so
@@ -348,9 +361,23 @@ def test_inertial_gravitation():
         return np.array([math.cos(th) * ge[0] - math.sin(th) * ge[1], math.sin(th) * ge[0] + math.cos(th) * ge[1],
                          ge[2]])
 
-    want = eci(4) + (eci(4) - 2 * eci(3) + eci(2)) / 24
-    got = np.array([s[sd.S_GH], s[sd.S_GH + 1], s[sd.S_G]])
-    np.testing.assert_allclose(got, want, rtol=0, atol=1e-14)
+    push = for_frame(sd.push_increment, sd.INERTIAL)
+    ls = []
+    for k in range(1, 4 * m + 1):
+        push(s, cfg, t0 + (2 * k - 1) * DT, w * DT, f * DT)
+        assert push(s, cfg, t0 + 2 * k * DT, w * DT, f * DT) == 1
+        if (k - 1) % m == 0:
+            ls.append(k)
+        want = eci(ls[-1])
+        if len(ls) >= 3:
+            want = want + (eci(ls[-1]) - 2 * eci(ls[-2]) + eci(ls[-3])) / (24 * m * m)
+        got = np.array([s[sd.S_GH], s[sd.S_GH + 1], s[sd.S_G]])
+        # The first update has no v(k-2): its point r + T/2 v lies on the chord, r Omega^2 T^2/8 = 1.0e-6 m above the
+        # circle, 2 gamma/a of that = 3.2e-12 m/s^2 in G, which reaches the third l cycle's term divided by 24 M^2.
+        # With M = 2 the held G misses Omega |G_h| T^2 = 1.2e-7 m/s over each pair of updates, which moves r^i by
+        # ~1e-8 m by the fourth l cycle: g/R of that, 2e-14 m/s^2.
+        tol = {1: 4e-12, 3: 4e-12 / (24 * m * m) + 1e-14}.get(len(ls), 1e-14 if m == 1 else 4e-14)
+        np.testing.assert_allclose(got, want, rtol=0, atol=tol)
 
 
 @pytest.mark.parametrize("frame", ["geographic", "inertial"])
@@ -648,25 +675,35 @@ def sampled_sums(w, f, h):
     return al, ve, co, sc
 
 
-WS = np.array([[1.3, -2.1, 0.7], [-0.9, 1.8, 2.4], [2.2, 0.6, -1.5], [0.4, -1.7, 1.1]])
-FS = np.array([[2.1, -3.3, -9.0], [-1.2, 4.4, -10.6], [3.6, 0.8, -8.1], [-2.5, 1.9, -9.9]])
+WS = np.array([[1.3, -2.1, 0.7], [-0.9, 1.8, 2.4], [2.2, 0.6, -1.5], [0.4, -1.7, 1.1], [-1.6, 0.3, 2.0],
+               [0.8, 2.5, -0.6], [-2.0, -0.4, 1.4]])
+FS = np.array([[2.1, -3.3, -9.0], [-1.2, 4.4, -10.6], [3.6, 0.8, -8.1], [-2.5, 1.9, -9.9], [1.7, -2.2, -9.4],
+               [-0.6, 3.1, -10.2], [2.8, -1.4, -8.7]])
 
 
 @pytest.mark.parametrize("samples", [1, 2, 3])
-def test_sampled_rates_one_update(samples):
-    """Instantaneous samples at 0, dt, ..., N dt: sigma = alpha + coning, V = sum dv, sculling as
-    docs/algorithms.md; N = 1 applies neither."""
-    w, f = WS[:samples + 1], FS[:samples + 1]
+def test_sampled_rates_two_updates(samples):
+    """Instantaneous samples at 0, dt, ..., 2N dt: each update's sigma = alpha + coning, V = sum dv, sculling as
+    docs/algorithms.md, the sums starting afresh at each update from its first interval (whose start sample is the
+    last one of the update before); N = 1 applies neither. Lab frame: C_k = C_k-1 exp([sigma_k x]), v_k = v_k-1 +
+    C_k-1 (V_k + rot + scul_k) + g T, trapezoidal position."""
+    w, f = WS[:2 * samples + 1], FS[:2 * samples + 1]
     cfg = sd.make_config(samples=samples, earth_model="none", imu_rates="sampled")
     s = sd.init_state(0.0, LAT0, LON0, H0, V0.copy(), *ATT)
     out = np.full((4, 14), np.nan)
-    rows = out[:sd.run_rates(s, cfg, DT * np.arange(samples + 1), w, f, out)]
-    assert len(rows) == 1
-    al, vv, co, sc = sampled_sums(w, f, DT)
-    if samples == 1:
-        co, sc = np.zeros(3), np.zeros(3)
-    pos, v1, c1 = lab_expect(al + co, vv, sc, samples * DT)
-    check_row(rows[0], samples * DT, *pos, v1, c1, pos=1e-16, hm=1e-12, vel=1e-15, att=1e-15)
+    rows = out[:sd.run_rates(s, cfg, DT * np.arange(2 * samples + 1), w, f, out)]
+    assert len(rows) == 2
+    T = samples * DT
+    c, v, p = cbn(*ATT), V0.copy(), np.zeros(3)
+    for k in range(2):
+        al, vv, co, sc = sampled_sums(w[k * samples:(k + 1) * samples + 1], f[k * samples:(k + 1) * samples + 1], DT)
+        if samples == 1:
+            co, sc = np.zeros(3), np.zeros(3)
+        sigma = al + co
+        v1 = v + c @ (vv + savage(sigma, vv) + sc) + np.array([0.0, 0.0, float(gamma(LAT0, H0))]) * T
+        p = p + (v + v1) / 2 * T
+        c, v = c @ expm(sigma), v1
+        check_row(rows[k], (k + 1) * T, *lab_position(*p), v, c, pos=1e-16, hm=1e-12, vel=4e-15, att=2e-15)
 
 
 # --- the j cycle: return codes, clocks -------------------------------------------------------------
@@ -769,6 +806,11 @@ def test_frame_limit():
         run(cfg, s, 3.0 + DT * np.arange(1, n + 1), np.tile(w * DT, (n, 1)), np.tile(f * DT, (n, 1)))
         # the first update's mid-latitude lat0 + T/2 vn/(R_N + h) (1.2e-7 rad) is beyond for the first two
         assert sd.frame_limit(s) == (3.0 if flagged else None)
+    for lat0 in (LIMIT, -LIMIT):  # exactly at the limit is not beyond it
+        w, f, c = steady_sensors(lat0, H0, 0.0, (0.0, 0.0, 0.0))
+        s = sd.init_state(3.0, lat0, LON0, H0, np.zeros(3), 0.0, 0.0, 0.0)
+        run(sd.make_config(), s, 3.0 + DT * np.arange(1, 3), np.tile(w * DT, (2, 1)), np.tile(f * DT, (2, 1)))
+        assert sd.frame_limit(s) is None
 
 
 @pytest.mark.parametrize("lat", [-math.radians(89.7), math.radians(89.7)])
@@ -829,7 +871,8 @@ def test_init_state_slots():
     assert s[sd.S_NK] == 0.0 and s[sd.S_NJ] == 0.0 and s[sd.S_NL] == 0.0 and s[sd.S_INI] == 0.0
 
 
-@pytest.mark.parametrize("frame,l_every", [("geographic", 1), ("geographic", 3), ("wander", 1), ("wander", 3),
+@pytest.mark.parametrize("frame,l_every", [("geographic", 1), ("geographic", 2), ("geographic", 3), ("wander", 1),
+                                           ("wander", 3),
                                            ("free", 1), ("inertial", 1)])
 def test_vertical_flight(frame, l_every):
     """Climbing straight up at 8 m/s from rest horizontally: f^n = 2 w_ie x v - [0, 0, gamma(h(t))] (w_en = 0), each
@@ -861,3 +904,74 @@ def test_vertical_flight(frame, l_every):
         hm, vel = (1e-9 * j, 4e-13) if frame == "inertial" else (1e-10, 2e-14)
         vel += 2 * OMEGA * math.cos(LAT0) * abs(vz - vd) * j * T
         check_row(row, j * T, LAT0, LON0, h, [0, 0, vz], c, pos=2e-15, hm=hm, vel=vel, att=2e-14)
+
+
+@pytest.mark.parametrize("frame", FRAMES)
+@pytest.mark.parametrize("accel,att", [(20.0, ATT), (0.0, (0.0, 0.0, 0.0))])
+def test_east_acceleration_on_the_equator(frame, accel, att):
+    """From rest, accelerating due east at a along the equator (tan L = 0, h fixed): v_E = a t, lon = lon0 + a t^2/(2
+    (a_e + h)); the frame rate w_in = [Omega + v_E/(a_e + h), 0, 0] grows each update, so the velocity step's
+    1/12 dzeta term and the mid-interval extrapolation are exercised with a closed form. Sensors: w^b = C_n^b w_in
+    (linear in t: its increments exact), f^n = [0, a, (2 Omega + v_E/(a_e + h)) v_E - gamma] (quadratic in t:
+    Simpson exact). The Coriolis term at v_mid = v(t + T/2) misses T^3/24 d^2/dt^2 of it (2e-14 m/s per
+    update), the third-order terms of the rate ramp (below). Level and north with a = 0: rest, where the
+    inertial frame's ECI z velocity stays exactly 0."""
+    c = cbn(*att)
+    re_h = A + H0  # R_E at the equator is the semi-major axis
+    g = float(gamma(0.0, H0))
+    n = 16
+    t = DT * np.arange(n + 1)
+    ve = accel * t
+
+    def f_d(v):
+        return (2 * OMEGA + v / re_h) * v - g
+
+    w_int = np.array([c.T @ [OMEGA * DT + (ve[i] + ve[i + 1]) / 2 * DT / re_h, 0.0, 0.0] for i in range(n)])
+    dv = np.array([c.T @ [0.0, accel * DT, DT / 6 * (f_d(ve[i]) + 4 * f_d((ve[i] + ve[i + 1]) / 2) + f_d(ve[i + 1]))]
+                   for i in range(n)])
+    cfg = sd.make_config(frame=frame)
+    s = sd.init_state(0.0, 0.0, LON0, H0, np.zeros(3), *att)
+    rows = run(cfg, s, t[1:], w_int, dv)
+    assert len(rows) == n // 2
+    for k, row in enumerate(rows, 1):
+        tk = 2 * k * DT
+        # inertial: the ulp of |v^i| (465 m/s), 5.7e-14. The updates are exact to second order in T; the third-order
+        # terms of the rate ramp dw/dt = a/(a_e + h), 1/12 T^3 dw/dt x f for the body's and again for the frame's
+        # rotation (docs/algorithms.md), bound what is left: dw/dt |f| T^3/6 per update (the first update, with no
+        # earlier frame rate, has no dzeta at all: the same size)
+        vel = (4e-13 if frame == "inertial" else 2e-14 * k) + k * accel / re_h * math.hypot(accel, g) * (2 * DT)**3 / 6
+        check_row(row, tk, 0.0, LON0 + accel * tk * tk / (2 * re_h), H0, [0.0, accel * tk, 0.0], c, pos=2e-15,
+                  hm=2e-9 * (k + 1) if frame == "inertial" else 1e-10, vel=vel, att=2e-14)  # r^i: 3 ulps a step
+
+
+def test_first_mid_velocity():
+    """The first update of a local-level frame has no v(k-2): v_mid = (v(0) + v_pred(1))/2 with v_pred(1) the velocity
+    update from v(0) (docs/algorithms.md), its zeta = (w_ie + w_en) T at the l cycle's point, lat0 + T/2 v_N/(R_N +
+    h0), h0 - T/2 v_D, gravity there (Somigliana); as in test_velocity_step, with dzeta = 0."""
+    v0 = np.array([60.0, 150.0, -8.0])
+    s = sd.init_state(0.0, LAT0, LON0, H0, v0.copy(), *ATT)
+    cfg = sd.make_config()
+    T = 1.0 / 64.0
+    sigma, dv, scul = np.array([0.01, -0.02, 0.015]), np.array([0.3, -0.2, -0.15]), np.array([1e-4, -2e-4, 5e-5])
+    got = np.array(sd._first_mid_velocity(s, cfg, sd.GEOGRAPHIC, T, *sigma, *dv, *scul))  # frame 3rd: not for_frame
+    r_n, r_e = radii(LAT0)
+    lm, hm = LAT0 + T / 2 * v0[0] / (r_n + H0), H0 - T / 2 * v0[2]
+    r_n, r_e = radii(lm)
+    w_ie = np.array([OMEGA * math.cos(lm), 0.0, -OMEGA * math.sin(lm)])
+    w_en = np.array([v0[1] / (r_e + hm), -v0[0] / (r_n + hm), -v0[1] * math.tan(lm) / (r_e + hm)])
+    zeta = (w_ie + w_en) * T
+    u = cbn(*ATT) @ (dv + savage(sigma, dv) + scul)
+    u = u - 0.5 * np.cross(zeta, u) + np.cross(zeta, np.cross(zeta, u)) / 12
+    v1 = v0 + u + (np.array([0.0, 0.0, float(gamma(lm, hm))]) - np.cross(2 * w_ie + w_en, v0)) * T
+    np.testing.assert_allclose(got, (v0 + v1) / 2, rtol=0, atol=1e-14)
+
+
+def test_exact_order_below_the_series_limit():
+    """--order exact with |sigma| = 0.0099 rad, just inside the series of (cos s/2 - 1, sin(s/2)/s): 16 updates about
+    body x turn roll by 16 s (Rodrigues) to round-off, 1e-17 rad per update."""
+    n, step = 16, 0.0099
+    cfg = sd.make_config(samples=1, earth_model="none")
+    s = sd.init_state(0.0, LAT0, LON0, H0, np.zeros(3), 0.0, 0.0, 0.0)
+    rows = run(cfg, s, DT * np.arange(1, n + 1), np.tile([step, 0.0, 0.0], (n, 1)), np.zeros((n, 3)))
+    for k, row in enumerate(rows, 1):
+        assert row[7] == pytest.approx(k * step, rel=0, abs=2e-17 * k + 2e-17)
