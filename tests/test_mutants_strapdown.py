@@ -156,11 +156,12 @@ def steady_sensors(lat, h, ve, att):
 FRAMES = ["geographic", "wander", "free", "inertial"]
 
 
-def steady_run(frame, lat, ve, att=ATT, n=24, samples=2, bias=0.0, t0=0.0, state=False, **kw):
+def steady_run(frame, lat, ve, att=ATT, n=24, samples=2, bias=0.0, t0=0.0, state=False, alpha=0.0, **kw):
     w, f, c = steady_sensors(lat, H0, ve, att)
     f = f + c.T @ np.array([0.0, 0.0, bias])  # a vertical accelerometer error (for --vertical hold)
     cfg = sd.make_config(samples=samples, frame=frame, **kw)
     s = sd.init_state(t0, lat, LON0, H0, np.array([0.0, ve, 0.0]), *att)
+    turn_azimuth(s, alpha, lat, c, [0.0, ve, 0.0])
     t = t0 + DT * np.arange(1, n + 1)
     rows = run(cfg, s, t, np.tile(w * DT, (n, 1)), np.tile(f * DT, (n, 1)))
     return (rows, c, s) if state else (rows, c)
@@ -173,7 +174,7 @@ def steady_run(frame, lat, ve, att=ATT, n=24, samples=2, bias=0.0, t0=0.0, state
 @pytest.mark.parametrize("lat,ve,t0", [(LAT0, 0.0, 0.0), (LAT0, 150.0, 0.0), (math.radians(-33.8), -120.0, 0.0),
                                        (LAT0, 150.0, 100.0)])
 def test_steady_flight_along_a_parallel(frame, lat, ve, t0):
-    rows, c = steady_run(frame, lat, ve, t0=t0)
+    rows, c = steady_run(frame, lat, ve, t0=t0, alpha=0.7 if frame in ("wander", "free") and t0 else 0.0)
     assert len(rows) == 12
     r_e = radii(lat)[1]
     for k, row in enumerate(rows, 1):
@@ -212,6 +213,18 @@ def test_steady_flight_fed_each_way(frame, how):
         t = 2 * k * DT
         check_row(row, t0 + t, LAT0, LON0 + 150.0 * t / ((r_e + H0) * math.cos(LAT0)), H0, [0.0, 150.0, 0.0], c,
                   pos=2e-15, hm=2e-8, vel=5e-13, att=2e-14)
+
+
+def turn_azimuth(s, alpha, lat, c, v):
+    """A wander/free state whose azimuth has turned by alpha (docs/algorithms.md "Mechanisation frames"):
+    C_w^e = C_n^e Rz(alpha), v^w = Rz(-alpha) v^n, C_b^w = Rz(-alpha) C_b^n (q: qz(-alpha) (x) q_nb)."""
+    if not alpha:
+        return
+    rz = np.array([[math.cos(alpha), -math.sin(alpha), 0.0], [math.sin(alpha), math.cos(alpha), 0.0], [0, 0, 1.0]])
+    s[sd.S_CNE:sd.S_CNE + 9] = (cne(lat, LON0) @ rz).ravel()
+    s[sd.S_C:sd.S_C + 9] = (rz.T @ c).ravel()
+    s[sd.S_Q:sd.S_Q + 4] = qmul([math.cos(alpha / 2), 0.0, 0.0, -math.sin(alpha / 2)], s[sd.S_Q:sd.S_Q + 4])
+    s[sd.S_V:sd.S_V + 3] = s[sd.S_VP:sd.S_VP + 3] = rz.T @ np.asarray(v, float)
 
 
 def kinematics(lat, lon, h, v, t, steps=16):
@@ -257,12 +270,7 @@ def test_constant_velocity_flight(frame, vertical, attitude, alpha):
     t0, n = 50.0, 8
     cfg = sd.make_config(frame=frame, vertical=vertical, attitude=attitude)
     s = sd.init_state(t0, lat, LON0, H0, V_GEN.copy(), *ATT)
-    if alpha:  # an azimuth that has turned: C_w^e = C_n^e Rz(a), v^w = Rz(-a) v^n, C_b^w = Rz(-a) C_b^n
-        rz = np.array([[math.cos(alpha), -math.sin(alpha), 0.0], [math.sin(alpha), math.cos(alpha), 0.0], [0, 0, 1.0]])
-        s[sd.S_CNE:sd.S_CNE + 9] = (cne(lat, LON0) @ rz).ravel()
-        s[sd.S_C:sd.S_C + 9] = (rz.T @ c).ravel()
-        s[sd.S_Q:sd.S_Q + 4] = qmul([math.cos(alpha / 2), 0.0, 0.0, -math.sin(alpha / 2)], s[sd.S_Q:sd.S_Q + 4])
-        s[sd.S_V:sd.S_V + 3] = s[sd.S_VP:sd.S_VP + 3] = rz.T @ V_GEN
+    turn_azimuth(s, alpha, lat, c, V_GEN)
     rows = run(cfg, s, t0 + DT * np.arange(1, n + 1), np.tile(w * DT, (n, 1)), np.tile(f * DT, (n, 1)))
     assert len(rows) == 4
     pos_now = for_frame(sd.position, sd.kernel_frame(cfg))(s, cfg)  # what the filter reads: the last row's
@@ -457,6 +465,7 @@ def test_constant_acceleration(rule, attitude):
     s = sd.init_state(0.0, LAT0, LON0, H0, V0.copy(), *ATT)
     rows = run(cfg, s, DT * np.arange(1, n + 1), np.zeros((n, 3)), np.tile(f * DT, (n, 1)))
     assert len(rows) == 10
+    assert for_frame(sd.position, sd.GEOGRAPHIC)(s, cfg) == tuple(rows[-1][1:4])  # what the filter reads
     T = 3 * DT
     for k, row in enumerate(rows, 1):
         t = k * T
@@ -907,40 +916,42 @@ def test_vertical_flight(frame, l_every):
 
 
 @pytest.mark.parametrize("frame", FRAMES)
-@pytest.mark.parametrize("accel,att", [(20.0, ATT), (0.0, (0.0, 0.0, 0.0))])
-def test_east_acceleration_on_the_equator(frame, accel, att):
-    """From rest, accelerating due east at a along the equator (tan L = 0, h fixed): v_E = a t, lon = lon0 + a t^2/(2
-    (a_e + h)); the frame rate w_in = [Omega + v_E/(a_e + h), 0, 0] grows each update, so the velocity step's
-    1/12 dzeta term and the mid-interval extrapolation are exercised with a closed form. Sensors: w^b = C_n^b w_in
-    (linear in t: its increments exact), f^n = [0, a, (2 Omega + v_E/(a_e + h)) v_E - gamma] (quadratic in t:
-    Simpson exact). The Coriolis term at v_mid = v(t + T/2) misses T^3/24 d^2/dt^2 of it (2e-14 m/s per
-    update), the third-order terms of the rate ramp (below). Level and north with a = 0: rest, where the
-    inertial frame's ECI z velocity stays exactly 0."""
+@pytest.mark.parametrize("lat,accel,att", [(0.0, 20.0, ATT), (0.0, 0.0, (0.0, 0.0, 0.0)), (LAT0, 20.0, ATT)])
+def test_east_acceleration_along_a_parallel(frame, lat, accel, att):
+    """From rest, accelerating due east at a along a parallel (h fixed): v_E = a t, lon = lon0 + a t^2/(2 R cos L),
+    R = R_E + h; the frame rate w_in = [Omega cos L + v_E/R, 0, -Omega sin L - v_E tan L/R] grows each update, so
+    the velocity step's 1/12 dzeta term and the mid-interval extrapolation are exercised with a closed form.
+    Sensors: w^b = C_n^b w_in (linear in t: its increments exact), f^n = (2 w_ie + w_en) x v + [0, a, -gamma]
+    (quadratic in t: Simpson exact). The Coriolis term at v_mid = v(t + T/2) misses T^3/24 of its second derivative
+    (2e-14 m/s per update), the third-order terms of the rate ramp (below). Level and north at the equator with
+    a = 0: rest, where the inertial frame's ECI z velocity stays exactly 0."""
     c = cbn(*att)
-    re_h = A + H0  # R_E at the equator is the semi-major axis
-    g = float(gamma(0.0, H0))
+    big_r = radii(lat)[1] + H0
+    sl, cl, tl = math.sin(lat), math.cos(lat), math.tan(lat)
+    g = float(gamma(lat, H0))
     n = 16
     t = DT * np.arange(n + 1)
     ve = accel * t
 
-    def f_d(v):
-        return (2 * OMEGA + v / re_h) * v - g
+    def f_n(v):
+        return np.array([(2 * OMEGA * sl + v * tl / big_r) * v, accel, (2 * OMEGA * cl + v / big_r) * v - g])
 
-    w_int = np.array([c.T @ [OMEGA * DT + (ve[i] + ve[i + 1]) / 2 * DT / re_h, 0.0, 0.0] for i in range(n)])
-    dv = np.array([c.T @ [0.0, accel * DT, DT / 6 * (f_d(ve[i]) + 4 * f_d((ve[i] + ve[i + 1]) / 2) + f_d(ve[i + 1]))]
-                   for i in range(n)])
+    w_int = np.array([c.T @ (np.array([OMEGA * cl, 0.0, -OMEGA * sl]) * DT
+                             + (ve[i] + ve[i + 1]) / 2 * DT / big_r * np.array([1.0, 0.0, -tl])) for i in range(n)])
+    dv = np.array([c.T @ (DT / 6 * (f_n(ve[i]) + 4 * f_n((ve[i] + ve[i + 1]) / 2) + f_n(ve[i + 1]))) for i in range(n)])
     cfg = sd.make_config(frame=frame)
-    s = sd.init_state(0.0, 0.0, LON0, H0, np.zeros(3), *att)
+    s = sd.init_state(0.0, lat, LON0, H0, np.zeros(3), *att)
     rows = run(cfg, s, t[1:], w_int, dv)
     assert len(rows) == n // 2
     for k, row in enumerate(rows, 1):
         tk = 2 * k * DT
         # inertial: the ulp of |v^i| (465 m/s), 5.7e-14. The updates are exact to second order in T; the third-order
-        # terms of the rate ramp dw/dt = a/(a_e + h), 1/12 T^3 dw/dt x f for the body's and again for the frame's
-        # rotation (docs/algorithms.md), bound what is left: dw/dt |f| T^3/6 per update (the first update, with no
+        # terms of the rate ramp |dw/dt| = a/(R cos L), 1/12 T^3 dw/dt x f for the body's and again for the frame's
+        # rotation (docs/algorithms.md), bound what is left: |dw/dt| |f| T^3/6 per update (the first update, with no
         # earlier frame rate, has no dzeta at all: the same size)
-        vel = (4e-13 if frame == "inertial" else 2e-14 * k) + k * accel / re_h * math.hypot(accel, g) * (2 * DT)**3 / 6
-        check_row(row, tk, 0.0, LON0 + accel * tk * tk / (2 * re_h), H0, [0.0, accel * tk, 0.0], c, pos=2e-15,
+        ramp = accel / (big_r * cl) * math.hypot(accel, g) * (2 * DT)**3 / 6
+        vel = (4e-13 if frame == "inertial" else 2e-14 * k) + k * ramp
+        check_row(row, tk, lat, LON0 + accel * tk * tk / (2 * big_r * cl), H0, [0.0, accel * tk, 0.0], c, pos=2e-15,
                   hm=2e-9 * (k + 1) if frame == "inertial" else 1e-10, vel=vel, att=2e-14)  # r^i: 3 ulps a step
 
 
