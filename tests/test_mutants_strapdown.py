@@ -986,3 +986,26 @@ def test_exact_order_below_the_series_limit():
     rows = run(cfg, s, DT * np.arange(1, n + 1), np.tile([step, 0.0, 0.0], (n, 1)), np.zeros((n, 3)))
     for k, row in enumerate(rows, 1):
         assert row[7] == pytest.approx(k * step, rel=0, abs=2e-17 * k + 2e-17)
+
+
+@pytest.mark.parametrize("frame", ["wander", "free"])
+def test_wander_l_cycle_point(frame):
+    """The wander/free l cycle takes the Earth rate Omega r and gravity at the mid-interval point, whose C_w^e third row
+    is r + T/2 r x rho ([ZS] 2.2; docs/algorithms.md): flying north at 60 m/s with azimuth 0 that is the NED third
+    row at L + T/2 v_N/(R_N + h) (and, free, azimuth Omega sin L T/2), to its second order (T/2 |rho|)^2/2."""
+    v = np.array([60.0, 0.0, 0.0])
+    r_n, r_e = radii(LAT0)
+    w_ie = np.array([OMEGA * math.cos(LAT0), 0.0, -OMEGA * math.sin(LAT0)])
+    w_en = np.array([0.0, -v[0] / (r_n + H0), 0.0])
+    c = cbn(*ATT)
+    f = c.T @ (np.cross(2 * w_ie + w_en, v) - np.array([0.0, 0.0, float(gamma(LAT0, H0))]))
+    cfg = sd.make_config(frame=frame)
+    s = sd.init_state(0.0, LAT0, LON0, H0, v.copy(), *ATT)
+    run(cfg, s, DT * np.arange(1, 3), np.tile(c.T @ (w_ie + w_en) * DT, (2, 1)), np.tile(f * DT, (2, 1)))
+    lm = LAT0 + DT * v[0] / (r_n + H0)  # T/2 = DT
+    am = OMEGA * math.sin(LAT0) * DT if frame == "free" else 0.0  # the free azimuth turns at Omega sin L
+    second = (DT * math.hypot(v[0] / (r_n + H0), am / DT)) ** 2 / 2  # |r + T/2 r x rho| - 1
+    np.testing.assert_allclose(s[sd.S_WIE:sd.S_WIE + 3],
+                               OMEGA * np.array([math.cos(lm) * math.cos(am), -math.cos(lm) * math.sin(am),
+                                                 -math.sin(lm)]), rtol=0, atol=OMEGA * (second + 4e-15))
+    assert s[sd.S_G] == pytest.approx(float(gamma(lm, H0)), rel=1e-14, abs=0)
