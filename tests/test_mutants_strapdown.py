@@ -1009,3 +1009,26 @@ def test_wander_l_cycle_point(frame):
                                OMEGA * np.array([math.cos(lm) * math.cos(am), -math.cos(lm) * math.sin(am),
                                                  -math.sin(lm)]), rtol=0, atol=OMEGA * (second + 4e-15))
     assert s[sd.S_G] == pytest.approx(float(gamma(lm, H0)), rel=1e-14, abs=0)
+
+
+def test_inertial_gravitation_second_difference():
+    """The inertial l cycle's quadrature term (G_l - 2 G_l-1 + G_l-2)/(24 M^2) (docs/algorithms.md) on all three
+    components: three l cycles at heights 0, 100 and 400 m over one point, with ECI = ECEF at the l cycle's
+    mid-interval time and no velocity, so the point is r^i itself and G = g - Omega^2 [x, y, 0] there ([ZS1] eq.
+    1-3-26; normal gravity along the ellipsoid normal, Somigliana)."""
+    T = 0.02
+    cfg = sd.make_config(frame="inertial")
+    s = sd.init_state(0.0, LAT0, LON0, H0, np.zeros(3), 0.0, 0.0, 0.0)
+    s[sd.S_T], s[sd.S_T0] = -T / 2, 0.0  # mid-interval time = t0: ECI = ECEF
+    r_e = radii(LAT0)[1]
+    sl, cl, so, co = math.sin(LAT0), math.cos(LAT0), math.sin(LON0), math.cos(LON0)
+    gs = []
+    for h in (0.0, 100.0, 400.0):
+        x, y = (r_e + h) * cl * co, (r_e + h) * cl * so
+        s[sd.S_RI:sd.S_RI + 3] = x, y, (r_e * (1 - E2) + h) * sl
+        sd._l_cycle_inertial(s, cfg, T, 0.0, 0.0, 0.0)
+        g = float(gamma(LAT0, h))
+        gs.append(np.array([-g * cl * co - OMEGA ** 2 * x, -g * cl * so - OMEGA ** 2 * y, -g * sl]))
+    want = gs[2] + (gs[2] - 2 * gs[1] + gs[0]) / 24
+    # the geodetic round trip of r to an ulp of |r| (1e-9 m) moves G by 2 gamma/a of it: 3e-15 m/s^2
+    np.testing.assert_allclose([s[sd.S_GH], s[sd.S_GH + 1], s[sd.S_G]], want, rtol=0, atol=2e-14)
