@@ -188,6 +188,19 @@ def test_matmul_by_hand() -> None:
     np.testing.assert_array_equal(em.matmul_bt(a, bt), expect)
 
 
+def test_set_block_and_set_skew_write_the_whole_block() -> None:
+    """The helpers write all nine elements of their 3x3 block (the zeros of [v x] too) and nothing else."""
+    m = np.full((5, 6), np.nan)
+    em._set_skew(m, 1, 2, np.array([1.0, 2.0, 3.0]), -2.0)  # -2 [v x]
+    np.testing.assert_array_equal(m[1:4, 2:5], [[0.0, 6.0, -4.0], [-6.0, 0.0, 2.0], [4.0, -2.0, 0.0]])
+    m[1:4, 2:5] = np.nan
+    assert np.all(np.isnan(m))
+    em._set_block(m, 2, 3, np.arange(9.0).reshape(3, 3), -0.5)
+    np.testing.assert_array_equal(m[2:5, 3:6], -0.5 * np.arange(9.0).reshape(3, 3))
+    m[2:5, 3:6] = np.nan
+    assert np.all(np.isnan(m))
+
+
 def test_transition_is_second_order() -> None:
     """Phi = I + F T + (F T)^2 / 2 (Groves 3.2.3): F = [[0, 1], [-4, 0]], T = 0.5: F T = [[0, .5], [-2, 0]],
     (F T)^2 = -I."""
@@ -584,19 +597,25 @@ def test_feedback_laboratory_mode() -> None:
     """earth = none: the flat NED offset moves by -dp, h by +dp_D; the latitude/longitude kept beside it
     are the offset's through the start point's radii."""
     s = state(CFG_LAB)
-    cne0 = s[sd.S_CNE : sd.S_CNE + 9].copy()
+    s0 = s.copy()
     x = np.zeros(em.NX)
     x[em.X_DP : em.X_DP + 3] = [10.0, -4.0, 2.0]
+    x[em.X_BG : em.X_BG + 3] = [1e-3, 2e-3, 3e-3]  # the states after dp: not positions
     x[em.X_BARO] = 0.5
     bias = np.zeros(kf.B_SIZE)
     kf.feedback(s, CFG_LAB, bias, x)
     np.testing.assert_array_equal(s[sd.S_PF : sd.S_PF + 3], [30.0, -21.0, 4.0])
     assert s[sd.S_H] == H0 + 2.0
-    np.testing.assert_array_equal(s[sd.S_CNE : sd.S_CNE + 9], cne0)
+    # nothing else but the attitude (rewritten from q: round-off) and the lat/lon kept beside the position
+    same = np.ones(sd.S_SIZE, bool)
+    same[sd.S_PF : sd.S_PF + 3] = same[sd.S_H] = same[sd.S_LATC] = same[sd.S_LONC] = False
+    same[sd.S_Q : sd.S_Q + 4] = same[sd.S_C : sd.S_C + 9] = False
+    np.testing.assert_array_equal(s[same], s0[same])
+    np.testing.assert_array_equal(bias[0:3], [-1e-3, -2e-3, -3e-3])
     r_n, r_e = radii(LAT)
     assert s[sd.S_LATC] == pytest.approx(LAT + 30.0 / (r_n + H0), rel=0, abs=1e-16)
     assert s[sd.S_LONC] == pytest.approx(LON - 21.0 / ((r_e + H0) * math.cos(LAT)), rel=0, abs=1e-16)
-    assert bias[kf.B_BARO] == -0.5 and np.all(bias[:12] == 0.0)
+    assert bias[kf.B_BARO] == -0.5 and np.all(bias[3:12] == 0.0)
     np.testing.assert_allclose(s[sd.S_C : sd.S_C + 9], cbn(*ATT).ravel(), rtol=0, atol=1e-15)
 
 
@@ -645,6 +664,15 @@ def test_metres_per_radian() -> None:
     mn, me = kf.metres_per_radian(state(), CFG)
     assert mn == pytest.approx(r_n + H0, rel=1e-15, abs=0)
     assert me == pytest.approx((r_e + H0) * math.cos(LAT), rel=1e-14, abs=0)
+    # the solution 0.1 rad north of its start and 600 m higher: its own point, not the start's
+    s = state()
+    s[sd.S_CNE : sd.S_CNE + 9] = cne(LAT + 0.1, LON).ravel()
+    s[sd.S_H] = H0 + 600.0
+    for_frame(sd.sync_position, sd.GEOGRAPHIC)(s, CFG)
+    r_n2, r_e2 = radii(LAT + 0.1)
+    mn, me = kf.metres_per_radian(s, CFG)
+    assert mn == pytest.approx(r_n2 + H0 + 600.0, rel=1e-15, abs=0)
+    assert me == pytest.approx((r_e2 + H0 + 600.0) * math.cos(LAT + 0.1), rel=1e-14, abs=0)
     s = state(CFG_LAB)
     s[sd.S_H] = 9000.0  # not used in laboratory mode
     mn, me = kf.metres_per_radian(s, CFG_LAB)
@@ -725,6 +753,7 @@ def test_heading() -> None:
     s = state()
     roll, pitch, yaw = ATT
     nu, H, R = kf.heading(s, 195.0 * DEG, 0.1)
+    assert nu.shape == (1,) and H.shape == (1, 22) and R.shape == (1, 1)
     assert nu[0] == pytest.approx(5.0 * DEG, rel=1e-13, abs=0)
     He = np.zeros((1, 22))
     He[0, 0:3] = [math.tan(pitch) * math.cos(yaw), math.tan(pitch) * math.sin(yaw), 1.0]
