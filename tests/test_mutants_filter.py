@@ -107,6 +107,8 @@ def test_as_array_puts_each_figure_at_its_index() -> None:
     for i, v in expect.items():
         assert sp[i] == v
     assert s.as_array()[em.SP_BARO_DRIFT] == 0.0  # default: no baro drift
+    # ImuSpec's defaults: no noise, no bias, tau 3600 s
+    np.testing.assert_array_equal(em.ImuSpec().as_array(), [0, 0, 0, 3600.0, 0, 0, 0, 0, 3600.0, 0, 0])
     assert s.as_array(3)[em.SP_BARO_DRIFT] == 3.0
 
 
@@ -824,3 +826,18 @@ def test_initial_covariance() -> None:
     d = np.array([0.0625, 0.0625, 16.0] + [0.25] * 3 + [100.0] * 3 + [4.0] * 3 + [25.0] * 3 + [9.0] * 3 + [49.0] * 3
                  + [36.0])
     np.testing.assert_array_equal(P, np.diag(d))
+
+
+def test_module_level_layout() -> None:
+    """The constants mutmut does not mutate (module level), pinned by value: the state layout of docs/filter.md
+    "State", the process-model vector of errmodel's docstring, the bias vector of kalman's docstring, and the
+    states a magnetometer heading corrects (heading, both gyro-bias parts: docs/filter.md "Fine alignment")."""
+    assert (em.X_PHI, em.X_DV, em.X_DP, em.X_BG, em.X_BA, em.X_GG, em.X_GA, em.X_BARO) == (0, 3, 6, 9, 12, 15, 18, 21)
+    assert em.NX == 22 and em.N_CONTRACT == 15
+    assert (em.SP_GYRO_ARW, em.SP_GYRO_BIAS, em.SP_GYRO_GM, em.SP_GYRO_TAU, em.SP_GYRO_RRW, em.SP_ACC_VRW,
+            em.SP_ACC_BIAS, em.SP_ACC_GM, em.SP_ACC_TAU, em.SP_ACC_RRW, em.SP_BARO_DRIFT) == tuple(range(11))
+    assert (kf.B_BG, kf.B_BA, kf.B_GG, kf.B_GA, kf.B_BARO, kf.B_SIZE) == (0, 3, 6, 9, 12, 13)
+    np.testing.assert_array_equal(kf.ALL, np.ones(22))
+    free = np.zeros(22)
+    free[[2, 9, 10, 11, 15, 16, 17]] = 1.0
+    np.testing.assert_array_equal(kf.MAG_FREE, free)
