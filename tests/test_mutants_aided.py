@@ -410,3 +410,355 @@ def test_navigate_aided_default_declination_and_static_defaults() -> None:
     assert abs(st["nis"][0, 2]) < 1e-20
     rows, st = nav(static=[[0.0, 0.01]], init=init(sigma_vel=0.01))
     assert rows[0, col("sigma_vd")] ** 2 == pytest.approx(0.5e-4, rel=1e-12)  # P 1e-4, R 1e-4
+
+
+# ---------------------------------------------------------------------- the driver's rules, one by one
+
+G_DATA = float(gamma(math.radians(LAT0), H0))
+CFG_LAB1 = sd.make_config(samples=1, earth_model="none")
+
+
+def integral_exp(w: np.ndarray, T: float) -> np.ndarray:
+    """int_0^T exp([w x] t) dt = T I + (1 - cos aT)/a^2 [w x] + (T - sin(aT)/a)/a^2 [w x]^2 (Rodrigues, integrated)."""
+    a = float(np.linalg.norm(w))
+    k = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+    return T * np.eye(3) + (1 - math.cos(a * T)) / a**2 * k + (T - math.sin(a * T) / a) / a**2 * (k @ k)
+
+
+def rodrigues(r: np.ndarray) -> np.ndarray:
+    a = float(np.linalg.norm(r))
+    k = np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
+    return np.eye(3) + math.sin(a) / a * k + (1 - math.cos(a)) / a**2 * (k @ k)
+
+
+def run_direct(rows, bias=None, P=None, gnss=None, baro=None, mag=None, static=None, s=None, p_hist=None,
+               p_every=1000, spec=None, cfg=CFG_LAB1, predict_every=1):
+    s = sd.init_state(0.0, math.radians(LAT0), math.radians(LON0), H0, np.zeros(3), 0.0, 0.0, 0.0) if s is None else s
+    P = np.zeros((em.NX, em.NX)) if P is None else P
+    bias = np.zeros(kf.B_SIZE) if bias is None else bias
+    out = np.empty((len(rows) + 1, aided.OUT_SIZE))
+    counts = np.zeros((6, 2), dtype=np.int64)
+    log = np.empty((40, 6))
+    e = np.empty
+    n, nl = aided.run_aided(s, cfg, np.ascontiguousarray(rows[:, 0]), np.ascontiguousarray(rows[:, 1:4]),
+                            np.ascontiguousarray(rows[:, 4:7]), e((0, 10)) if gnss is None else np.array(gnss, float),
+                            e((0, 3)) if baro is None else np.array(baro, float),
+                            e((0, 5)) if mag is None else np.array(mag, float),
+                            e((0, 4)) if static is None else np.array(static, float),
+                            (spec or em.ImuSpec()).as_array(), np.zeros(3), 0.0, 5.0, predict_every, P, bias, out,
+                            counts, log, np.zeros((0, em.NX, em.NX)) if p_hist is None else p_hist, p_every)
+    return s, P, bias, out[:n], counts, log[:nl]
+
+
+def test_the_bias_estimates_are_subtracted_from_the_increments() -> None:
+    """dtheta - (b_g + g_g) dt and dv - (b_a + g_a) dt (aided docstring): with the estimates preset and no
+    measurements, the solution turns at -(b_g + g_g) and accelerates by C (f - b_a - g_a) + g: after T,
+    C = exp([w x] T) and v = int_0^T exp([w x] t) dt (f - b_a - g_a) + [0, 0, g] T (constant rates)."""
+    bias = np.zeros(kf.B_SIZE)
+    bias[0:12] = [1e-3, 2e-3, 3e-3, 0.01, 0.02, 0.03, 4e-4, 5e-4, 6e-4, 0.004, 0.005, 0.006]
+    s, P, b, out, counts, log = run_direct(imu(), bias=bias)
+    w = -(bias[0:3] + bias[6:9])
+    f = np.array([0.0, 0.0, -G_DATA]) - (bias[3:6] + bias[9:12])
+    T = 0.1
+    np.testing.assert_allclose(s[sd.S_C : sd.S_C + 9], rodrigues(w * T).ravel(), rtol=0, atol=1e-13)
+    g0 = s[sd.S_G0]
+    np.testing.assert_allclose(s[sd.S_V : sd.S_V + 3], integral_exp(w, T) @ f + [0.0, 0.0, g0 * T], rtol=0,
+                               atol=1e-12)
+    assert len(out) == N_ROWS and counts.sum() == 0
+
+
+def test_samples_two_and_a_duplicate_row() -> None:
+    """Two samples per attitude update: an output row per pair; a row not after the last (a repeated time) is
+    skipped, and its increments are not counted anywhere (the rest window's mean rate stays that of the
+    accepted rows)."""
+    cfg = sd.make_config(samples=2, earth_model="none")
+    rows = imu(wz=2e-3)
+    rows = np.insert(rows, 5, rows[4] * [1, 100, 100, 100, 1, 1, 1], axis=0)  # t = 0.05 again, a wild rate
+    spec = em.ImuSpec(gyro_bias=1e-3)
+    s, P, b, out, counts, log = run_direct(rows, spec=spec, cfg=cfg, static=[[0.0, 0.1, 1.0, 1e-3]],
+                                           P=np.diag([0.0] * 9 + [1e-6] * 3 + [0.0] * 10))
+    assert len(out) == 5
+    np.testing.assert_allclose(out[:, 0], [0.02, 0.04, 0.06, 0.08, 0.1], atol=1e-15)
+    assert counts[aided.K_ZARU].tolist() == [1, 0]
+    assert b[kf.B_BG + 2] == pytest.approx(1e-3, rel=1e-9)  # half of the mean raw rate 2e-3
+
+
+def test_propagation_uses_the_intervals_mean_attitude_and_force() -> None:
+    """_propagate: F from the mean C (acc[0:9] / T) and f^n (acc[9:12] / T): over T = 0.5 s an accelerometer
+    bias variance diag(1, 2, 3) reaches dv as T^2 C diag C^T, a tilt variance diag(4, 5, 0) as
+    T^2 [f x] diag [f x]^T = T^2 g^2 diag(5, 4, 0) (f^n = [0, 0, -g]); laboratory mode (no Earth terms)."""
+    s = sd.init_state(0.0, 0.7, 0.1, 100.0, np.zeros(3), 0.0, 0.0, 0.0)
+    c = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    T, g = 0.5, 9.75
+    acc = np.concatenate([(c * T).ravel(), [0.0, 0.0, -g * T], [T]])
+    P = np.zeros((em.NX, em.NX))
+    P[12:15, 12:15] = np.diag([1.0, 2.0, 3.0])
+    P[0:3, 0:3] = np.diag([4.0, 5.0, 0.0])
+    aided.flush_propagation(s, CFG_LAB1, em.ImuSpec().as_array(), P, acc, sd.GEOGRAPHIC)
+    assert np.all(acc == 0.0)
+    expect = T**2 * (c @ np.diag([1.0, 2.0, 3.0]) @ c.T + g**2 * np.diag([5.0, 4.0, 0.0]))
+    np.testing.assert_allclose(P[3:6, 3:6], expect, rtol=1e-14, atol=0)
+    # nothing pending: nothing happens
+    P0 = P.copy()
+    aided.flush_propagation(s, CFG_LAB1, em.ImuSpec().as_array(), P, np.zeros(13), sd.GEOGRAPHIC)
+    np.testing.assert_array_equal(P, P0)
+
+
+def test_propagation_with_the_earth_model() -> None:
+    """With WGS-84 the gravity gradient couples dp_D into dv_D: P_dvD = (gamma' T)^2 P_dpD with
+    gamma' = -d gamma/dh (exact height derivative of the typed Somigliana series), level at rest."""
+    cfg = sd.make_config(samples=1)
+    lat = math.radians(LAT0)
+    s = sd.init_state(0.0, lat, 0.1, H0, np.zeros(3), 0.0, 0.0, 0.0)
+    T = 1.0
+    acc = np.concatenate([(np.eye(3) * T).ravel(), [0.0, 0.0, -G_DATA * T], [T]])
+    P = np.zeros((em.NX, em.NX))
+    P[8, 8] = 1.0
+    aided.flush_propagation(s, cfg, em.ImuSpec().as_array(), P, acc, sd.GEOGRAPHIC)
+    gg = -(gamma(lat, H0 + 1000.0) - gamma(lat, H0 - 1000.0)) / 2000.0
+    assert P[5, 5] == pytest.approx(gg**2, rel=1e-9)
+
+
+def test_skip_rules_of_a_fresh_and_a_continued_run() -> None:
+    """Rows before the start are skipped (several of them); a fresh state uses a row at its own time, a continued
+    one (after one update) skips the row at its time, used by the call before (aided.run_aided)."""
+    lat, lon = math.radians(LAT0), math.radians(LON0)
+    g_row = lambda t: [t, lat, lon, H0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0]  # noqa: E731
+    b_row = lambda t: [t, H0, 1.0]  # noqa: E731
+    m_row = lambda t: [t, 1.0, 0.0, 1.0, 0.1]  # noqa: E731
+    P = np.diag([0.01, 0.01, 0.01, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0] + [0.0] * 12 + [1.0])
+    kw = dict(gnss=[g_row(-2.0), g_row(-1.0), g_row(0.0), g_row(0.03)], baro=[b_row(-2.0), b_row(-1.0), b_row(0.0),
+              b_row(0.03)], mag=[m_row(-2.0), m_row(-1.0), m_row(0.0), m_row(0.03)],
+              static=[[-3.0, -2.0, 0.5, 1.0], [-2.0, -1.0, 0.5, 1.0], [0.0, 0.01, 0.5, 1.0]])
+    s, P1, _, out, counts, log = run_direct(imu(5), P=P.copy(), **kw)
+    assert counts[:, 0].tolist() == [2, 2, 2, 2, 1, 1]  # the window [0, 0.01]: a ZUPT and the ZARU at 0.01
+    assert counts[:, 1].tolist() == [0] * 6
+    assert log[0, 0] == 0.0 and log[0, 1] == aided.K_GNSS_POS
+    # continued after exactly one update: rows at its time (0.01) are skipped, later ones used
+    s = sd.init_state(0.0, lat, lon, H0, np.zeros(3), 0.0, 0.0, 0.0)
+    s, P2, _, out, counts, log = run_direct(imu(1), P=P.copy(), s=s)
+    assert s[sd.S_NK] == 1.0
+    kw = dict(gnss=[g_row(0.01), g_row(0.03)], baro=[b_row(0.01), b_row(0.03)], mag=[m_row(0.01), m_row(0.03)],
+              static=[[0.005, 0.04, 0.005, 1.0]])
+    s, P2, _, out, counts, log = run_direct(imu(5)[1:], P=P2, s=s, **kw)
+    assert counts[:, 0].tolist() == [1, 1, 1, 1, 3, 1]
+    np.testing.assert_allclose(log[:3, 0], [0.02, 0.03, 0.03], atol=1e-15)  # ZUPT at 0.02, then the fix at 0.03
+
+
+def test_measurements_flush_the_pending_propagation() -> None:
+    """predict_every 5: P is propagated at updates 5 and 10 only, and before each measurement; the NIS of a
+    measurement at 0.03 s shows P at 0.03 s: position variance 1 + t^2 (sigma_vel 1), heading variance
+    p + t^2 p_bz (z gyro bias), vertical velocity variance 1 + t^2 p_az (z accelerometer bias), gyro bias
+    variance p + K^2 t (rate random walk), each with nu = 1 (or a rate of 1e-3 rad/s)."""
+    t = 0.03
+    lat, lon = math.radians(LAT0), math.radians(LON0)
+    dn = 1.0 / (RN + H0)
+    P = np.zeros((em.NX, em.NX))
+    P[6:9, 6:9] = P[3:6, 3:6] = np.eye(3)
+    _, _, _, _, c, log = run_direct(imu(5), P=P.copy(), predict_every=5,
+                                    gnss=[[t, lat + dn, lon, H0, NAN, NAN, NAN, 1.0, 1.0, 1.0]])
+    assert log[0, 2] == pytest.approx(1.0 / (2.0 + t * t), rel=1e-9)
+    _, _, _, _, c, log = run_direct(imu(5), P=P.copy(), predict_every=5, baro=[[t, H0 - 1.0, 1.0]])
+    assert log[0, 2] == pytest.approx(1.0 / (2.0 + t * t), rel=1e-9)
+    P = np.zeros((em.NX, em.NX))
+    P[2, 2], P[11, 11] = 1e-4, 1.0
+    psi = 0.01
+    _, _, _, _, c, log = run_direct(imu(5), P=P, predict_every=5,
+                                    mag=[[t, math.cos(psi), -math.sin(psi), 1.0, 0.01]])
+    assert log[0, 2] == pytest.approx(psi**2 / (1e-4 + t * t + 1e-4), rel=1e-9)
+    P = np.zeros((em.NX, em.NX))
+    P[5, 5], P[14, 14] = 1.0, 1.0
+    _, _, _, _, c, log = run_direct(imu(5), P=P, predict_every=5, static=[[t - 1e-9, t, 1.0, 1.0]],
+                                    s=sd.init_state(0.0, lat, lon, H0, np.array([0.0, 0.0, 1.0]), 0.0, 0.0, 0.0))
+    assert log[0, 1] == aided.K_ZUPT and log[0, 2] == pytest.approx(1.0 / (2.0 + t * t), rel=1e-9)
+    P = np.zeros((em.NX, em.NX))
+    P[11, 11] = 1e-6
+    spec = em.ImuSpec(gyro_rrw=math.sqrt(1e-5))
+    rows = imu(5, wz=1e-3)
+    _, _, _, _, c, log = run_direct(rows, P=P, predict_every=5, spec=spec, static=[[0.0, 0.035, 1.0, 1e-3]])
+    assert log[-1, 1] == aided.K_ZARU and log[-1, 0] == pytest.approx(0.04, abs=1e-15)
+    # P_bg at 0.04: 1e-6 + 1e-5 * 0.04; R: 1e-6 + 1e-5 * 0.03 / 3 (the walk over the window's 0.03 s of rows)
+    assert log[-1, 2] == pytest.approx(1e-6 / (1e-6 + 4e-7 + 1e-6 + 1e-7), rel=1e-9)
+
+
+def test_late_measurements_are_taken_back_along_the_velocity() -> None:
+    """Moving at 1 m/s north and 1 m/s down: a fix and a baro height stamped 0.045 s, at the true position of that
+    time, are applied at the update of 0.05 s with zero innovation (p(t_m) = p(t_k) - v (t_k - t_m))."""
+    lat, lon = math.radians(LAT0), math.radians(LON0)
+    s = sd.init_state(0.0, lat, lon, H0, np.array([1.0, 0.0, 1.0]), 0.0, 0.0, 0.0)
+    P = np.diag([0.0] * 6 + [1.0] * 3 + [0.0] * 12 + [1.0])
+    tm = 0.045
+    s, P, b, out, c, log = run_direct(imu(), P=P, s=s, gnss=[[tm, lat + tm / (RN + H0), lon, H0 - tm, NAN, NAN, NAN,
+                                                                1.0, 1.0, 1.0]], baro=[[tm, H0 - tm, 1.0]])
+    assert c[0, 0] == 1 and c[2, 0] == 1
+    assert log[0, 0] == tm and log[0, 2] < 1e-12 and log[1, 2] < 1e-12
+
+
+def test_partial_rows_are_not_used() -> None:
+    """A GNSS position needs lat, lon and h; a velocity vn, ve and vd; a baro row its height; a magnetometer row
+    all three components. Rows with any of them NaN are not used (nothing counted)."""
+    lat, lon = math.radians(LAT0), math.radians(LON0)
+    gnss = [[0.02, NAN, lon, H0, NAN, 0.0, 0.0, 1.0, 1.0, 1.0], [0.03, lat, NAN, H0, 0.0, NAN, 0.0, 1.0, 1.0, 1.0],
+            [0.04, lat, lon, NAN, 0.0, 0.0, NAN, 1.0, 1.0, 1.0]]
+    baro = [[0.02, NAN, 1.0]]
+    mag = [[0.02, NAN, 1.0, 1.0, 0.1], [0.03, 1.0, NAN, 1.0, 0.1], [0.04, 1.0, 0.0, NAN, 0.1]]
+    P = np.diag([0.01] * 3 + [1.0] * 6 + [0.0] * 12 + [1.0])
+    _, _, _, out, c, log = run_direct(imu(), P=P, gnss=gnss, baro=baro, mag=mag)
+    assert c.sum() == 0 and len(log) == 0
+
+
+def test_log_rows_of_every_kind() -> None:
+    """Each measurement's log row: t (its own, or the update's for ZUPT/ZARU), kind, NIS, dof, accepted, ratio
+    (NIS and ratio worked by hand: P 1, R 1, nu 1 per measured axis; gate 5)."""
+    lat, lon = math.radians(LAT0), math.radians(LON0)
+    P = np.diag([0.0, 0.0, 1.0] + [1.0] * 3 + [0.0] * 3 + [0.0] * 12 + [1.0])
+    gnss = [[0.02, NAN, NAN, NAN, -1.0, -1.0, -1.0, 1.0, 1.0, 1.0]]
+    rows = imu(wz=0.0)
+    _, _, _, out, c, log = run_direct(rows, P=P, gnss=gnss)
+    np.testing.assert_allclose(log[0], [0.02, aided.K_GNSS_VEL, 1.5, 3, 1, 1 / math.sqrt(2) / 5], rtol=1e-12)
+    P = np.diag([0.0, 0.0, 0.01] + [0.0] * 18 + [0.0])
+    _, _, _, out, c, log = run_direct(rows, P=P, mag=[[0.03, math.cos(0.1), -math.sin(0.1), 0.0, 0.1]])
+    np.testing.assert_allclose(log[0], [0.03, aided.K_MAG, 0.5, 1, 1, 0.1 / math.sqrt(0.02) / 5], rtol=1e-12)
+    P = np.diag([0.0] * 3 + [1.0] * 3 + [0.0] * 3 + [0.0] * 2 + [1e-6] + [0.0] * 10)
+    s = sd.init_state(0.0, lat, lon, H0, np.array([0.0, 0.0, 1.0]), 0.0, 0.0, 0.0)
+    _, _, _, out, c, log = run_direct(imu(wz=1e-3), P=P, s=s, static=[[0.0, 0.01, 1.0, 1e-3]])
+    np.testing.assert_allclose(log[0], [0.01, aided.K_ZUPT, 0.5, 3, 1, 1 / math.sqrt(2) / 5], rtol=1e-9)
+    np.testing.assert_allclose(log[1], [0.01, aided.K_ZARU, 0.5, 3, 1, 1e-3 / math.sqrt(2e-6) / 5], rtol=1e-9)
+
+
+def test_rest_windows_in_a_row() -> None:
+    """Three windows: [0.02, 0.04] (its start on an update: ZUPTs at 0.02, 0.03, 0.04), (0.051, 0.055] (no IMU row
+    inside: no ZARU), (0.055, 0.085] ending between updates (ZUPTs at 0.06, 0.07, 0.08, the ZARU at 0.09 without
+    a ZUPT). The mean raw rates are those of each window's own rows: 2e-3 rad/s in the first, 6e-3 in the
+    last (the rows at 0.02 and 0.09 turn at 1 rad/s: outside)."""
+    rows = imu()
+    rows[:, 3] = 2e-3 * DT
+    rows[1, 3] = rows[8, 3] = 1.0 * DT  # t = 0.02 and 0.09
+    rows[5:8, 3] = 6e-3 * DT  # 0.06 .. 0.08
+    P = np.diag([0.0] * 3 + [1.0] * 3 + [0.0] * 5 + [1.0] + [0.0] * 10)
+    static = [[0.02, 0.04, 1.0, 1.0], [0.051, 0.055, 1.0, 1.0], [0.055, 0.085, 1.0, 1.0]]
+    _, _, b, out, c, log = run_direct(rows, P=P, static=static)
+    assert c[aided.K_ZUPT].tolist() == [6, 0] and c[aided.K_ZARU].tolist() == [2, 0]
+    zupt_t = log[log[:, 1] == aided.K_ZUPT, 0]
+    np.testing.assert_allclose(zupt_t, [0.02, 0.03, 0.04, 0.06, 0.07, 0.08], atol=1e-15)
+    zaru = log[log[:, 1] == aided.K_ZARU]
+    np.testing.assert_allclose(zaru[:, 0], [0.04, 0.09], atol=1e-15)
+    # P_bgz 1, R 1: the first ZARU takes half of 2e-3; then P 1/2: the second a third of 6e-3 - 1e-3
+    assert b[kf.B_BG + 2] == pytest.approx(1e-3 + 5e-3 / 3, rel=1e-9)
+    assert zaru[0, 2] == pytest.approx(4e-6 / 2, rel=1e-9) and zaru[1, 2] == pytest.approx(25e-6 / 1.5, rel=1e-9)
+
+
+def test_direct_p_history_keeps_only_what_fits() -> None:
+    """p_hist receives P after every p_every-th output row while it has room (run_aided docstring)."""
+    P = np.diag([0.0] * 6 + [4.0] * 3 + [0.0] * 13)
+    hist = np.full((2, em.NX, em.NX), -1.0)
+    _, _, _, out, _, _ = run_direct(imu(), P=P, p_hist=hist, p_every=3)
+    assert len(out) == N_ROWS
+    assert hist[0, 6, 6] == 4.0 and hist[1, 6, 6] == 4.0
+
+
+def test_zaru_variance_holds_the_gauss_markov_walk() -> None:
+    """A Gauss-Markov part (sigma 1e-3 rad/s, tau 0.1 s) and a rate random walk (K^2 1e-5): the ZARU's variance
+    holds (K^2 + 2 sigma^2 / tau) T / 3 over the window's T = 0.05 s (aided docstring). P_gg follows the scalar
+    discretisation P <- Phi^2 P + (Phi^2 q + q) T / 2, Phi = 1 - T/tau + (T/tau)^2 / 2, q = 2 sigma^2 / tau
+    (Groves 3.2.3, docs/filter.md "Model"); P_bg = 1e-6 + K^2 t. Each part takes its share P/S of the 1e-3."""
+    spec = em.ImuSpec(gyro_bias=1e-3, gyro_gm=1e-3, gyro_tau=0.1, gyro_rrw=math.sqrt(1e-5))
+    P = np.zeros((em.NX, em.NX))
+    P[3:6, 3:6] = np.eye(3)
+    P[11, 11] = P[17, 17] = 1e-6
+    s, P, b, out, c, log = run_direct(imu(wz=1e-3), P=P, spec=spec, static=[[0.0, 0.05, 1.0, 1e-3]])
+    q, a = 2e-6 / 0.1, 0.1
+    phi = 1 - a + a * a / 2
+    p_gg = 1e-6
+    for _ in range(5):
+        p_gg = phi * phi * p_gg + (phi * phi * q + q) * 0.01 / 2
+    p_bg = 1e-6 + 1e-5 * 0.05
+    S = p_bg + p_gg + 1e-6 + (1e-5 + 2e-5) * 0.05 / 3
+    zaru = log[log[:, 1] == aided.K_ZARU][0]
+    assert zaru[2] == pytest.approx(1e-6 / S, rel=1e-8)
+    assert out[4, col("bg_z")] == pytest.approx(1e-3 * (p_bg + p_gg) / S, rel=1e-8)
+    # afterwards the Gauss-Markov estimate decays by exp(-T/tau) per update: 5 more of 0.01 s
+    assert b[kf.B_GG + 2] == pytest.approx(1e-3 * p_gg / S * math.exp(-0.5), rel=1e-8)
+    assert b[kf.B_BG + 2] == pytest.approx(1e-3 * p_bg / S, rel=1e-8)
+
+
+def test_after_k_update_accumulates_over_several_updates() -> None:
+    """Without a propagation in between (predict_every 3), acc holds the sums of C T and C dv of both intervals."""
+    cfg = CFG_LAB1
+    s = sd.init_state(0.0, 0.7, 0.1, 100.0, np.zeros(3), 0.0, 0.0, 0.0)
+    P = np.zeros((em.NX, em.NX))
+    acc, sums = np.zeros(13), np.zeros(7)
+    spec = em.ImuSpec().as_array()
+    s[sd.S_T], s[sd.S_NK] = 0.25, 1
+    sums[:] = [0, 0, 0, 1.0, 2.0, 3.0, 0.0]
+    aided.after_k_update(s, cfg, spec, P, np.zeros(13), acc, sums, 3, sd.GEOGRAPHIC)
+    s[sd.S_C : sd.S_C + 9] = [0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0]  # turned 90 deg
+    s[sd.S_T], s[sd.S_NK] = 0.75, 2
+    sums[0:6] = [0, 0, 0, 1.0, 2.0, 3.0]
+    aided.after_k_update(s, cfg, spec, P, np.zeros(13), acc, sums, 3, sd.GEOGRAPHIC)
+    np.testing.assert_allclose(acc[0:9], [0.25, -0.5, 0.0, 0.5, 0.25, 0.0, 0.0, 0.0, 0.75], atol=1e-15)
+    np.testing.assert_allclose(acc[9:12], [1.0 - 2.0, 2.0 + 1.0, 6.0], atol=1e-15)
+    assert acc[12] == 0.75 and np.all(P == 0.0)
+
+
+def test_push_rate_aided_velocity() -> None:
+    """The live path hands the bias-corrected rates to the strapdown: after one k update of 0.02 s at constant
+    rates, v = int_0^T exp([w x] t) dt (f - b_a) + [0, 0, g] T with w = w_raw - b_g (laboratory gravity)."""
+    cfg = sd.make_config(samples=2, earth_model="none")
+    s = sd.init_state(0.0, 0.7, 0.1, 100.0, np.zeros(3), 0.0, 0.0, 0.0)
+    bias = np.zeros(kf.B_SIZE)
+    bias[0:12] = [0.01, 0.02, 0.035, 0.1, 0.2, 0.3, 0.001, 0.002, 0.004, 0.01, 0.02, 0.03]
+    w_raw, f_raw = np.array([0.5, -0.25, 0.125]), np.array([1.0, 2.0, -9.0])
+    args = (em.ImuSpec().as_array(), np.zeros((em.NX, em.NX)), bias, np.zeros(13), np.zeros(7))
+    for t in (0.01, 0.02):
+        r = aided.push_rate_aided(s, cfg, *args, t, *w_raw, *f_raw, 1000, sd.GEOGRAPHIC)
+    assert r == 1
+    w = w_raw - (bias[0:3] + bias[6:9])
+    f = f_raw - (bias[3:6] + bias[9:12])
+    np.testing.assert_allclose(s[sd.S_C : sd.S_C + 9], rodrigues(w * 0.02).ravel(), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(s[sd.S_V : sd.S_V + 3], integral_exp(w, 0.02) @ f + [0, 0, s[sd.S_G0] * 0.02],
+                               rtol=0, atol=1e-9)
+
+
+def test_small_things() -> None:
+    """_record counts every rejection; filter_row's sigma of a bias sum below 1; _columns takes None as missing."""
+    log, counts = np.zeros((4, 6)), np.zeros((6, 2), dtype=np.int64)
+    n = 0
+    for _ in range(3):
+        n = aided._record(log, n, counts, 1.0, 2, 1, 9.0, 2.0, False)
+    assert counts[2].tolist() == [0, 3] and n == 3
+    P = np.zeros((em.NX, em.NX))
+    for i in range(3):
+        P[12 + i, 12 + i], P[18 + i, 18 + i], P[12 + i, 18 + i] = 0.25, 0.0625, 0.0
+        P[9 + i, 9 + i], P[15 + i, 15 + i] = 0.04, 0.0
+    out = np.zeros(aided.OUT_SIZE)
+    aided.filter_row(P, np.zeros(13), out)
+    np.testing.assert_allclose(out[29:35], [0.2] * 3 + [math.sqrt(0.3125)] * 3, rtol=1e-15)
+    np.testing.assert_array_equal(aided._columns([[1.0, 2.0, None]], 3, (None, None, 0.5), "baro"),
+                                  [[1.0, 2.0, 0.5]])
+
+
+def test_navigate_aided_defaults_and_messages() -> None:
+    """The defaults: grade consumer (turn-on sigmas 1 deg/s / 3 and 25 mg / 3, Gauss-Markov sigmas
+    B / 0.6173642831 with B 10 deg/h and 0.1 mg: core/grades.py, IEEE Std 952 annex C), two samples per update,
+    P propagated at every update, no covariance history; the messages name the input."""
+    _, st = aided.navigate_aided(np.zeros((0, 7)), init(), earth_model="none")
+    d = np.diag(st["P"])
+    assert d[9] == pytest.approx((math.pi / 180 / 3) ** 2, rel=1e-12)
+    assert d[12] == pytest.approx((25e-3 * 9.80665 / 3) ** 2, rel=1e-12)
+    assert d[15] == pytest.approx((10 * math.pi / 180 / 3600 / 0.6173642831) ** 2, rel=1e-12)
+    assert d[18] == pytest.approx((0.1e-3 * 9.80665 / 0.6173642831) ** 2, rel=1e-12)
+    rows, st = aided.navigate_aided(imu(), init(sigma_vel=1.0), spec=em.ImuSpec(), earth_model="none")
+    np.testing.assert_allclose(rows[:, 0], [0.02, 0.04, 0.06, 0.08, 0.1], atol=1e-15)
+    np.testing.assert_allclose(rows[:, col("sigma_n")] ** 2, rows[:, 0] ** 2, rtol=1e-9)  # propagated each time
+    assert st["P_history"].shape == (0, em.NX, em.NX)
+    rows, st = nav(covariance_every=1, baro_drift=2.0)
+    assert st["P_history"].shape == (N_ROWS, em.NX, em.NX)
+    np.testing.assert_allclose([p[21, 21] for p in st["P_history"]], 4.0 * rows[:, 0], rtol=1e-9)  # drift^2 t
+    for name, width, kw in (("gnss", 10, "gnss"), ("baro", 3, "baro"), ("mag", 5, "mag"), ("static", 4, "static")):
+        with pytest.raises(ValueError, match=rf"^{name}: at most {width} columns, got {width + 1}$"):
+            nav(**{kw: [[0.01] * (width + 1)]})
+        with pytest.raises(ValueError, match=rf"^{name}: rows must be sorted by time$"):
+            nav(**{kw: [[0.02] + [1.0] * (width - 1), [0.01] + [1.0] * (width - 1)]})
+    with pytest.raises(ValueError):
+        nav(lever_arm=(1.0, 2.0, 3.0, 4.0))
