@@ -542,6 +542,9 @@ def test_skip_rules_of_a_fresh_and_a_continued_run() -> None:
               static=[[0.005, 0.04, 0.005, 1.0]])
     s, P2, _, out, counts, log = run_direct(imu(5)[1:], P=P2, s=s, **kw)
     assert counts[:, 0].tolist() == [1, 1, 1, 1, 3, 1]
+    # one window before the start, then one at it
+    _, _, _, _, counts, _ = run_direct(imu(3), P=P.copy(), static=[[-2.0, -1.0, 0.5, 1.0], [0.0, 0.02, 0.5, 1.0]])
+    assert counts[aided.K_ZUPT].tolist() == [2, 0]
     np.testing.assert_allclose(log[:3, 0], [0.02, 0.03, 0.03], atol=1e-15)  # ZUPT at 0.02, then the fix at 0.03
 
 
@@ -627,25 +630,26 @@ def test_log_rows_of_every_kind() -> None:
 
 
 def test_rest_windows_in_a_row() -> None:
-    """Three windows: [0.02, 0.04] (its start on an update: ZUPTs at 0.02, 0.03, 0.04), (0.051, 0.055] (no IMU row
-    inside: no ZARU), (0.055, 0.085] ending between updates (ZUPTs at 0.06, 0.07, 0.08, the ZARU at 0.09 without
-    a ZUPT). The mean raw rates are those of each window's own rows: 2e-3 rad/s in the first, 6e-3 in the
-    last (the rows at 0.02 and 0.09 turn at 1 rad/s: outside)."""
+    """Four windows: [0.02, 0.04] (its start on an update: ZUPTs at 0.02, 0.03, 0.04), (0.045, 0.05] (a ZUPT and
+    the ZARU at 0.05), (0.055, 0.085] ending between updates (ZUPTs at 0.06, 0.07, 0.08, the ZARU at 0.09 without
+    a ZUPT), (0.091, 0.095] (no IMU row inside: no ZARU). The mean raw rates are those of each window's own
+    rows: 2e-3 rad/s in the first two, 6e-3 in the third (the rows at 0.02 and 0.09 turn at 1 rad/s: outside)."""
     rows = imu()
     rows[:, 3] = 2e-3 * DT
     rows[1, 3] = rows[8, 3] = 1.0 * DT  # t = 0.02 and 0.09
     rows[5:8, 3] = 6e-3 * DT  # 0.06 .. 0.08
     P = np.diag([0.0] * 3 + [1.0] * 3 + [0.0] * 5 + [1.0] + [0.0] * 10)
-    static = [[0.02, 0.04, 1.0, 1.0], [0.051, 0.055, 1.0, 1.0], [0.055, 0.085, 1.0, 1.0]]
+    static = [[0.02, 0.04, 1.0, 1.0], [0.045, 0.05, 1.0, 1.0], [0.055, 0.085, 1.0, 1.0], [0.091, 0.095, 1.0, 1.0]]
     _, _, b, out, c, log = run_direct(rows, P=P, static=static)
-    assert c[aided.K_ZUPT].tolist() == [6, 0] and c[aided.K_ZARU].tolist() == [2, 0]
+    assert c[aided.K_ZUPT].tolist() == [7, 0] and c[aided.K_ZARU].tolist() == [3, 0]
     zupt_t = log[log[:, 1] == aided.K_ZUPT, 0]
-    np.testing.assert_allclose(zupt_t, [0.02, 0.03, 0.04, 0.06, 0.07, 0.08], atol=1e-15)
+    np.testing.assert_allclose(zupt_t, [0.02, 0.03, 0.04, 0.05, 0.06, 0.07, 0.08], atol=1e-15)
     zaru = log[log[:, 1] == aided.K_ZARU]
-    np.testing.assert_allclose(zaru[:, 0], [0.04, 0.09], atol=1e-15)
-    # P_bgz 1, R 1: the first ZARU takes half of 2e-3; then P 1/2: the second a third of 6e-3 - 1e-3
-    assert b[kf.B_BG + 2] == pytest.approx(1e-3 + 5e-3 / 3, rel=1e-9)
-    assert zaru[0, 2] == pytest.approx(4e-6 / 2, rel=1e-9) and zaru[1, 2] == pytest.approx(25e-6 / 1.5, rel=1e-9)
+    np.testing.assert_allclose(zaru[:, 0], [0.04, 0.05, 0.09], atol=1e-15)
+    # P_bgz 1, R 1: the first ZARU takes half of 2e-3 (P 1/2), the second a third of 2e-3 - 1e-3 (P 1/3), the third
+    # a quarter of 6e-3 - 4/3 e-3: 2.5e-3
+    assert b[kf.B_BG + 2] == pytest.approx(2.5e-3, rel=1e-9)
+    np.testing.assert_allclose(zaru[:, 2], [4e-6 / 2, 1e-6 / 1.5, (14e-3 / 3) ** 2 / (4 / 3)], rtol=1e-9)
 
 
 def test_direct_p_history_keeps_only_what_fits() -> None:
@@ -762,3 +766,33 @@ def test_navigate_aided_defaults_and_messages() -> None:
             nav(**{kw: [[0.02] + [1.0] * (width - 1), [0.01] + [1.0] * (width - 1)]})
     with pytest.raises(ValueError):
         nav(lever_arm=(1.0, 2.0, 3.0, 4.0))
+
+
+def test_two_samples_per_update_sum_the_increments() -> None:
+    """Two samples per update: the interval's rate (for the lever arm) and specific force (for the propagation)
+    are the sums of both samples' increments over the interval. A tilt variance p reaches the north velocity as
+    g^2 t^2 p (phi x f^n with f^n = [0, 0, -g]); a velocity fix at 0.06 s with the lever arm moves v half way to
+    v_m - C (w x l) (yaw 0.1 * 0.06 rad)."""
+    rows, st = nav(init=init(sigma_level=math.degrees(1e-3)), samples=2)
+    np.testing.assert_allclose(rows[:, col("sigma_vn")] ** 2, G_DATA**2 * rows[:, 0] ** 2 * 1e-6, rtol=1e-9)
+    v_m = np.array([0.4, -0.2, 0.1])
+    rows, st = nav(imu(wz=0.1), gnss=[[0.06, NAN, NAN, NAN, *v_m, 2.0, 2.0, 1.0]], init=init(sigma_vel=1.0),
+                   lever_arm=(1.0, 0.0, 0.0), samples=2)
+    cwl = 0.1 * np.array([-math.sin(0.006), math.cos(0.006), 0.0])
+    np.testing.assert_allclose(rows[2, 4:7], (v_m - cwl) / 2, rtol=0, atol=1e-9)
+
+
+def test_the_nis_log_holds_every_measurement() -> None:
+    """navigate_aided sizes the log for two rows per GNSS fix, one per baro and magnetometer row, one ZUPT per
+    update and one ZARU per rest window: 13 fixes, 5 baro, 7 magnetometer rows and ten one-update windows
+    ((t - 0.005, t], a ZUPT and a ZARU each) fill it but for one row, and every one is logged."""
+    t = [round(0.01 * k, 12) for k in range(1, 11)]
+    gnss = [[t[min(k, 9)], LAT0, LON0, H0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0] for k in range(13)]
+    baro = [[t[k], H0, 1.0] for k in range(5)]
+    mag = [[t[k], 1.0, 0.0, 1.0, 1.0] for k in range(7)]
+    static = [[tk - 0.005, tk, 1.0, 1.0] for tk in t]
+    rows, st = nav(gnss=sorted(gnss), baro=baro, mag=mag, static=static, spec=em.ImuSpec(gyro_bias=1.0),
+                   init=init(sigma_pos=1.0, sigma_vel=1.0, sigma_level=1.0, sigma_yaw=1.0), baro_offset_sigma=1.0)
+    total = sum(a + r for a, r in st["counts"].values())
+    assert total == 2 * 13 + 5 + 7 + 10 + 10
+    assert len(st["nis"]) == total
