@@ -775,6 +775,7 @@ def test_two_samples_per_update_sum_the_increments() -> None:
     v_m - C (w x l) (yaw 0.1 * 0.06 rad)."""
     rows, st = nav(init=init(sigma_level=math.degrees(1e-3)), samples=2)
     np.testing.assert_allclose(rows[:, col("sigma_vn")] ** 2, G_DATA**2 * rows[:, 0] ** 2 * 1e-6, rtol=1e-9)
+    assert st["P"][3, 1] == pytest.approx(-G_DATA * 0.1 * 1e-6, rel=1e-9)  # cov(dv_N, phi_E) = f_D p t, f_D = -g
     v_m = np.array([0.4, -0.2, 0.1])
     rows, st = nav(imu(wz=0.1), gnss=[[0.06, NAN, NAN, NAN, *v_m, 2.0, 2.0, 1.0]], init=init(sigma_vel=1.0),
                    lever_arm=(1.0, 0.0, 0.0), samples=2)
