@@ -797,3 +797,15 @@ def test_the_nis_log_holds_every_measurement() -> None:
     total = sum(a + r for a, r in st["counts"].values())
     assert total == 2 * 13 + 5 + 7 + 10 + 10
     assert len(st["nis"]) == total
+
+
+def test_module_level_names_and_kinds() -> None:
+    """The constants mutmut does not mutate, by value (aided.py's module docstring and LOG_COLUMNS)."""
+    assert (aided.K_GNSS_POS, aided.K_GNSS_VEL, aided.K_BARO, aided.K_MAG, aided.K_ZUPT, aided.K_ZARU) == tuple(range(6))
+    assert aided.KIND_NAMES == ("gnss_pos", "gnss_vel", "baro", "mag", "zupt", "zaru")
+    assert aided.GNSS_COLUMNS == ("t", "lat", "lon", "h", "vn", "ve", "vd", "sigma_h", "sigma_v", "sigma_vel")
+    assert aided.BARO_COLUMNS == ("t", "h", "sigma") and aided.MAG_COLUMNS == ("t", "mx", "my", "mz", "sigma")
+    assert aided.STATIC_COLUMNS == ("t0", "t1", "sigma_v", "sigma_w")
+    assert aided.LOG_COLUMNS == ("t", "kind", "nis", "dof", "accepted", "ratio")
+    assert aided.OUT_SIZE == 35 and aided.OUT_COLUMNS[:14] == ("t", "lat", "lon", "h", "vn", "ve", "vd", "roll",
+                                                               "pitch", "yaw", "qw", "qx", "qy", "qz")
