@@ -809,3 +809,17 @@ def test_module_level_names_and_kinds() -> None:
     assert aided.LOG_COLUMNS == ("t", "kind", "nis", "dof", "accepted", "ratio")
     assert aided.OUT_SIZE == 35 and aided.OUT_COLUMNS[:14] == ("t", "lat", "lon", "h", "vn", "ve", "vd", "roll",
                                                                "pitch", "yaw", "qw", "qx", "qy", "qz")
+
+
+def test_rest_windows_sharing_their_ends_log_every_update() -> None:
+    """Five windows end to end over ten rows at 100 Hz, one update per row: each shared end gets the ZUPT of both
+    windows (their starts count, docs/filter.md), so 10 + 4 ZUPTs and 5 ZARUs, and the NIS log holds a row for
+    each of the 19 (it was sized for one ZUPT per update and dropped the last rows)."""
+    static = [[0.0, 0.02], [0.02, 0.04], [0.04, 0.06], [0.06, 0.08], [0.08, 0.10]]
+    _, st = nav(static=static, init=init(sigma_vel=1.0))
+    counts = st["counts"]
+    assert sum(counts["zupt"]) == 14 and sum(counts["zaru"]) == 5
+    log = st["nis"]
+    assert len(log) == 19
+    np.testing.assert_allclose(np.sort(log[log[:, 1] == aided.K_ZUPT, 0]),
+                               np.sort(np.r_[np.arange(1, 11) * DT, [0.02, 0.04, 0.06, 0.08]]), atol=1e-15)

@@ -495,7 +495,9 @@ def navigate_aided(
     n_out = t.shape[0] // int(cfg[sd.CFG_SAMPLES]) + 1
     out = np.empty((n_out, OUT_SIZE))
     counts = np.zeros((len(KIND_NAMES), 2), dtype=np.int64)
-    log = np.empty((2 * g.shape[0] + b.shape[0] + m.shape[0] + n_out + z.shape[0], len(LOG_COLUMNS)))
+    # one row per fix, baro, mag and attitude update (ZUPT), and per rest window a ZARU and the second
+    # ZUPT of an update shared by two windows (one ends where the next starts)
+    log = np.empty((2 * g.shape[0] + b.shape[0] + m.shape[0] + n_out + 2 * z.shape[0], len(LOG_COLUMNS)))
     if covariance_every < 0:
         raise ValueError("covariance_every must be >= 0")
     p_every = int(covariance_every) if covariance_every > 0 else n_out + 1

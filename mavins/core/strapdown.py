@@ -402,7 +402,10 @@ def _enter_inertial(s: np.ndarray) -> None:
 def _inertial_hold(s: np.ndarray, cfg: np.ndarray, vx: float, vy: float, vz: float) -> tuple[float, float, float]:
     """``--vertical hold`` in the inertial frame: move r^i along the ellipsoid normal back to the
     initial height and set the velocity's component along it (relative to the Earth, ``v^i -
-    Omega x r^i``) to the initial ``-v_D``; returns the new v^i (m/s)."""
+    Omega x r^i``, [ZS] 2.1) to the initial ``-v_D``; returns the new v^i (m/s).
+
+    The move must not change the velocity relative to the Earth, so v^i gains ``Omega x dr``
+    with the move dr; without it every update turned ``Omega cos L |dr|`` of it east."""
     th = earth.OMEGA * (s[S_T] - s[S_T0])
     ct, st = np.cos(th), np.sin(th)
     x, y, z = s[S_RI], s[S_RI + 1], s[S_RI + 2]
@@ -413,7 +416,8 @@ def _inertial_hold(s: np.ndarray, cfg: np.ndarray, vx: float, vy: float, vz: flo
     s[S_RI], s[S_RI + 1], s[S_RI + 2] = x + dh * nx, y + dh * ny, z + dh * nz
     dv = -s[S_VD0] - (nx * (vx + earth.OMEGA * y) + ny * (vy - earth.OMEGA * x) + nz * vz)
     sync_position(s, cfg, INERTIAL)
-    return vx + dv * nx, vy + dv * ny, vz + dv * nz
+    wx, wy = -earth.OMEGA * dh * ny, earth.OMEGA * dh * nx  # Omega x dr, Omega = [0, 0, OMEGA]
+    return vx + wx + dv * nx, vy + wy + dv * ny, vz + dv * nz
 
 
 @kernel
