@@ -110,6 +110,16 @@ def cbn(roll: float, pitch: float, yaw: float) -> np.ndarray:
 # -- angles: the tests' own forms, written apart from mavins.core.rotation (test_rotation checks they agree) --
 
 
+def quat_zyx(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    """q_b^n [w x y z] (Hamilton) of C_b^n = Rz(yaw) Ry(pitch) Rx(roll), typed from the half angles
+    (docs/conventions.md "Euler angles")."""
+    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
+    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
+    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
+    return np.array([cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
+                     cr * cp * sy - sr * sp * cy])
+
+
 def _wrap(a, half: float):  # type: ignore[no-untyped-def]
     w = half - (half - np.asarray(a, float)) % (2.0 * half)
     return np.where(w <= -half, w + 2.0 * half, w)[()]  # the modulo of a tiny negative rounds up to a whole turn

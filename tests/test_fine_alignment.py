@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 import pytest
-from support import quat_error, wrap_rad
+from support import quat_error, quat_zyx, wrap_rad
 
 from mavins.core import aided, align
 from mavins.core.grades import grade_figures
@@ -70,7 +70,7 @@ def _align(rest, grade: str, seed: int, mag: np.ndarray | None):
     if mag is not None:
         # MEMS: the coarse window also calibrates the gyro bias, mean rate minus the Earth rate in the
         # coarse attitude (what `mavins run --gyro-bias estimate` does); the filter refines it
-        c_nb = _c_nb(_quat(roll, pitch, yaw))
+        c_nb = _c_nb(quat_zyx(roll, pitch, yaw))
         w_ie = OMEGA * np.array([math.cos(math.radians(LAT)), 0.0, -math.sin(math.radians(LAT))])
         b0 = dth[:k].sum(axis=0) / dt - c_nb.T @ w_ie
         dth = dth - np.diff(np.concatenate(([ex.t0], t)))[:, None] * b0
@@ -93,15 +93,6 @@ def _align(rest, grade: str, seed: int, mag: np.ndarray | None):
     phi = quat_error(rows[-1:, 10:14], q_true[None, :])[0]
     c_nb = _c_nb(q_true)
     return rows[-1], phi, c_nb @ bg[last - 1], c_nb @ ba[last - 1]
-
-
-def _quat(roll: float, pitch: float, yaw: float) -> np.ndarray:
-    """Quaternion of C_b^n = Rz(yaw) Ry(pitch) Rx(roll)."""
-    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
-    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
-    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    return np.array([cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
-                     cr * cp * sy - sr * sp * cy])
 
 
 def _c_nb(q: np.ndarray) -> np.ndarray:

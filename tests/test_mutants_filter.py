@@ -29,7 +29,7 @@ from mavins.core import errmodel as em
 from mavins.core import kalman as kf
 from mavins.core import strapdown as sd
 from mavins.core.jit import for_frame
-from support import A, E2, OMEGA, cbn, gamma
+from support import A, E2, OMEGA, cbn, gamma, quat_zyx
 
 DEG = math.pi / 180.0
 CFG = sd.make_config(samples=2)  # WGS-84 Earth
@@ -52,15 +52,6 @@ def rodrigues(r) -> np.ndarray:
     t = math.sqrt(float(np.dot(r, r)))
     k = skew(r)
     return np.eye(3) + math.sin(t) / t * k + (1.0 - math.cos(t)) / (t * t) * (k @ k)
-
-
-def quat_euler(roll: float, pitch: float, yaw: float) -> np.ndarray:
-    """q_b^n of ZYX Euler angles, Hamilton [w x y z] (docs/conventions.md "Euler angles")."""
-    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
-    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
-    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    return np.array([cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
-                     cr * cp * sy - sr * sp * cy])
 
 
 def hamilton(p, q) -> np.ndarray:
@@ -574,7 +565,7 @@ def test_feedback_corrects_attitude_velocity_position_and_biases() -> None:
     c_exp = rodrigues(-phi) @ cbn(*ATT)
     np.testing.assert_allclose(s[sd.S_C : sd.S_C + 9], c_exp.ravel(), rtol=0, atol=1e-15)
     t = np.linalg.norm(phi)
-    q_exp = hamilton(np.concatenate([[math.cos(t / 2)], -math.sin(t / 2) * phi / t]), quat_euler(*ATT))
+    q_exp = hamilton(np.concatenate([[math.cos(t / 2)], -math.sin(t / 2) * phi / t]), quat_zyx(*ATT))
     q_exp *= np.sign(q_exp @ s[sd.S_Q : sd.S_Q + 4])  # q and -q are the same attitude
     np.testing.assert_allclose(s[sd.S_Q : sd.S_Q + 4], q_exp, rtol=0, atol=1e-15)
     np.testing.assert_array_equal(s[sd.S_V : sd.S_V + 3], [11.5, -6.75, 1.375])
@@ -630,7 +621,7 @@ def test_feedback_renormalises_the_quaternion() -> None:
     kf.feedback(s, CFG, np.zeros(kf.B_SIZE), x)
     q = s[sd.S_Q : sd.S_Q + 4]
     assert abs(q @ q - 1.0) < 4.5e-16
-    q_exp = hamilton([math.cos(0.0005), 0.0, 0.0, -math.sin(0.0005)], quat_euler(*ATT))
+    q_exp = hamilton([math.cos(0.0005), 0.0, 0.0, -math.sin(0.0005)], quat_zyx(*ATT))
     q_exp *= np.sign(q_exp @ q)  # q and -q are the same attitude
     np.testing.assert_allclose(q, q_exp, rtol=0, atol=1e-15)
     np.testing.assert_allclose(s[sd.S_C : sd.S_C + 9], (rodrigues(np.array([0, 0, -0.001])) @ cbn(*ATT)).ravel(),
