@@ -127,3 +127,24 @@ def test_nav_reads_and_writes_parquet_like_csv(tmp_path: Path) -> None:
     for other in ("b.csv", "c.parquet"):
         b = files.read_table(tmp_path / other, files.SOLUTION_COLUMNS)
         assert b.view(np.int64).tolist() == a.view(np.int64).tolist(), other
+
+
+def test_arrow_columns_to_numpy_and_back() -> None:
+    """The buffer-level conversion between numpy and pyarrow columns (files._numpy_of, files._arrow_table): a
+    chunked column whose chunks start inside their buffers (slices), a column with nulls (NaN, as pyarrow's
+    to_numpy gives), an empty column, and a table built from a non-contiguous array, all bit for bit."""
+    import pyarrow as pa
+
+    x = np.array([0.1, -2.5e-300, np.inf, -0.0, 1e308, 3.0, np.nan, 7.25])
+    whole = pa.Array.from_buffers(pa.float64(), len(x), [None, pa.py_buffer(x)])
+    sliced = pa.chunked_array([whole.slice(1, 3), whole.slice(5, 3)])
+    got = files._numpy_of(sliced)
+    assert got.tobytes() == np.concatenate([x[1:4], x[5:8]]).tobytes()
+    with_nulls = pa.array([1.5, None, -3.0], type=pa.float64())
+    np.testing.assert_array_equal(files._numpy_of(with_nulls), [1.5, np.nan, -3.0])
+    assert files._numpy_of(pa.chunked_array([], type=pa.float64())).shape == (0,)
+    data = np.arange(12.0).reshape(3, 4)[:, ::2]  # strided columns
+    table = files._arrow_table(("a", "b"), data)
+    assert table.column_names == ["a", "b"]
+    assert np.column_stack([files._numpy_of(table.column(i)) for i in range(2)]).tobytes() == \
+        np.ascontiguousarray(data).tobytes()
