@@ -358,19 +358,20 @@ class Service:
         try:
             while not stop.is_set():
                 self._batch_time = time.time()
-                batch, _ = self.master.receive(BATCH)
+                batch, n = self.master.receive(BATCH)
                 self._batch_age = self.master.age
-                if not batch:
-                    self._periodic()
+                if n:
+                    self._log_skipped()
+                    for msg, addr in batch:
+                        self._handle(msg, addr)
+                self._periodic()
+                if n < BATCH:
+                    # the socket is empty (receive read until it was): wait for the next datagram
+                    # here rather than ask it again, one read and one wake-up per datagram at kHz rates
                     if fd is not None:
                         select.select([fd], [], [], 0.05)
                     else:
                         time.sleep(0.002)
-                    continue
-                self._log_skipped()
-                for msg, addr in batch:
-                    self._handle(msg, addr)
-                self._periodic()
             self._drain()
         finally:
             self.close()

@@ -8,16 +8,17 @@ files read.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 
-@dataclass(frozen=True)
-class ImuSample:
+class ImuSample(NamedTuple):
     """One IMU sample: sensor time (s), gyro w_ib^b (rad/s), specific force f^b (m/s^2), FRD.
 
     ``mag`` is the magnetic field in the body frame (gauss) when the message
-    carries one, else None.
+    carries one, else None. A named tuple: one is built per sample at kHz rates,
+    at a fifth of a frozen dataclass's cost.
     """
 
     t: float

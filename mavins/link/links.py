@@ -20,6 +20,7 @@ from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Protocol
 
+from .decode import decode_one
 from .mavlink import mavlink, mavutil, parser as _parser
 
 RCVBUF_BYTES = 8 * 1024 * 1024
@@ -162,6 +163,10 @@ class UdpLink:
             if (late and shed_late) or (self.thin > 1 and self._seen % self.thin):
                 self.dropped_late += 1
                 self.skipped.append(data)
+                continue
+            one = decode_one(data)
+            if one is not None:
+                out.append((one, addr))
                 continue
             msgs = self.parser.parse_buffer(data) or []
             out.extend((m, addr) for m in msgs)
