@@ -12,7 +12,10 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import socket
+import subprocess
+import sys
 import threading
 import time
 from dataclasses import dataclass, field
@@ -21,12 +24,14 @@ from pathlib import Path
 import numpy as np
 
 from .aiding import FilterSettings
+from .core import jit
 from .core.frames import north_east_error
 from .core.rotation import euler_to_quat, quat_angle_rows
 from .engine import EngineConfig
 from .link.ingest import IngestConfig
 from .link.mavlink import mavutil
-from .service import Service, ServiceConfig, Summary
+from .link.publish import PublishConfig
+from .service import Service, ServiceConfig, Summary, warm_up
 
 log = logging.getLogger("mavins")
 
@@ -148,6 +153,33 @@ def compare(collected: Collected, truth: np.ndarray) -> dict[str, object]:
     return out
 
 
+PREWARM_WAIT_S = 600.0  # s: the longest the demo waits for the compiling process before it compiles itself
+
+
+def _engine_config(lat: float, lon: float, alt: float, heading: str, grade: str,
+                   aiding: tuple[str, ...]) -> EngineConfig:
+    return EngineConfig(lat=lat, lon=lon, alt=alt, heading=heading, align=5.0,
+                        filter=FilterSettings(spec=grade if grade != "ideal" else "navigation", aiding=aiding))
+
+
+def prewarm(heading: str, grade: str, aiding: tuple[str, ...]) -> None:
+    """Compile (or load) the kernels the demo's service calls, into the shared numba cache."""
+    warm_up(_engine_config(45.0, 7.0, 100.0, heading, grade, aiding), PublishConfig())
+
+
+def start_prewarm(heading: str, grade: str, aiding: tuple[str, ...]) -> subprocess.Popen | None:
+    """On a machine whose numba cache is empty, a second process that compiles the service's
+    kernels while this one simulates the flight (the simulator's kernel compiles here at the
+    same time); None when the cache is already there."""
+    if jit.cache_is_warm():
+        return None
+    print("mavins demo: first start of this version on this machine: compiling the navigation kernels "
+          f"(once; later starts load them from {jit.numba.config.CACHE_DIR})", flush=True)
+    code = f"from mavins.demo import prewarm; prewarm({heading!r}, {grade!r}, {tuple(aiding)!r})"
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(jit.numba.config.CACHE_DIR)}  # the folder this process loads from
+    return subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
+
+
 def run_demo(
     scenario: str = "flight", duration: float | None = 120.0, speed: float | None = 10.0, grade: str = "industrial",
     heading: str = "vehicle", rerun_path: Path | None = None, rerun_serve: bool = False, seed: int = 0,
@@ -160,11 +192,21 @@ def run_demo(
     from sim.stream import StreamOptions, stream
 
     stop = stop or threading.Event()
-    run = generate(load(scenario), duration=duration, seed=seed, grade=grade, usec_grid=True)
+    compiling = start_prewarm(heading, grade, aiding)
+    try:
+        run = generate(load(scenario), duration=duration, seed=seed, grade=grade, usec_grid=True)
+        if compiling is not None:
+            try:
+                compiling.wait(PREWARM_WAIT_S)
+            except subprocess.TimeoutExpired:
+                pass  # what it did not finish, the service compiles itself (killed below)
+    finally:
+        if compiling is not None and compiling.poll() is None:
+            compiling.kill()
+            compiling.wait()
     p_in, p_out = free_udp_port(), free_udp_port()
     init = run.init()
-    engine_cfg = EngineConfig(lat=init.lat, lon=init.lon, alt=init.h, heading=heading, align=5.0,
-                              filter=FilterSettings(spec=grade if grade != "ideal" else "navigation", aiding=aiding))
+    engine_cfg = _engine_config(init.lat, init.lon, init.h, heading, grade, aiding)
     recorder = None
     if rerun_path is not None or rerun_serve:
         from .record.recorder import Recorder

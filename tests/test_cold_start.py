@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import socket
 import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -94,3 +95,29 @@ def test_a_warm_start_says_nothing_about_compiling(tmp_path: Path) -> None:
         assert svc.wait(600) == 0, log_path.read_text()
     text = log_path.read_text()
     assert "ready: listening on" in text and "compiling" not in text, text
+
+
+def test_the_simulators_kernels_do_not_make_the_cache_warm(tmp_path: Path) -> None:
+    """``mavins demo`` compiles a simulator kernel (the scenario's size check) before the service
+    starts; that must not count as the navigation kernels being on disk."""
+    code = ("from sim.generate import check_size; from sim.scenarios import load; from mavins.core import jit; "
+            "check_size(load('flight'), duration=12.0, rate=None); print(jit.cache_is_warm())")
+    res = subprocess.run([sys.executable, "-c", code], env={**ENV, "NUMBA_CACHE_DIR": str(tmp_path)}, cwd=tmp_path,
+                         capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stderr
+    assert list(tmp_path.rglob("*.nbi")), "the simulator kernel was not cached"
+    assert res.stdout.strip() == "False"
+
+
+def test_demo_cold_start_compiles_once_beside_the_simulation(tmp_path: Path) -> None:
+    """On an empty cache the demo says once that it compiles, compiles the service's kernels in
+    a second process while it simulates, and the service then finds them on disk (it would say
+    so again if it had to compile them itself)."""
+    cache = tmp_path / "numba-cache"
+    cache.mkdir()
+    res = mavins("demo", "--duration", "12", "--no-rerun", cwd=tmp_path, env={**ENV, "NUMBA_CACHE_DIR": str(cache)})
+    text = res.stdout + res.stderr
+    assert res.returncode == 0, text
+    assert text.count("compiling the navigation kernels") == 1, text
+    assert text.index("compiling the navigation kernels") < text.index("NAVIGATING")
+    assert list(cache.rglob("strapdown.*.nbi")) and list(cache.rglob("aided.*.nbi"))

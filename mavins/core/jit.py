@@ -39,8 +39,10 @@ if not os.environ.get("NUMBA_CACHE_DIR"):
 
 
 def cache_is_warm() -> bool:
-    """Whether compiled kernels of this core version are already on disk (numba index files)."""
-    return any(Path(numba.config.CACHE_DIR).rglob("*.nbi"))
+    """Whether compiled kernels of this core version are already on disk: numba index files of
+    strapdown.py, which every navigating command loads (the simulator's kernels share the folder
+    and are compiled first by ``mavins demo``: they do not count)."""
+    return any(Path(numba.config.CACHE_DIR).rglob("strapdown.*.nbi"))
 
 
 def kernel(func: F) -> F:

@@ -67,7 +67,6 @@ from .rotation import (
     quat_mul_s,
     quat_to_dcm_s,
     rotvec_to_dcm_s,
-    rotvec_to_quat_s,
 )
 from .settings import BY_NAME, Strapdown
 
