@@ -14,7 +14,7 @@ consumer-grade flight) in one process, preceded each time by:
 The difference between the last row and the first is what the same Python
 costs after an idle pause on this machine; it is why the whole service
 process at 1 kHz uses several times the in-process figure
-(docs/performance.md, "The 1 kHz CPU budget").
+(docs/performance.md, "Waking up" and "Profile of what remains").
 
 Run from the repository root::
 
