@@ -166,3 +166,68 @@ def test_a_udp_link_gives_the_same_messages_either_way() -> None:
     for g, w in zip([got[0], got[1], got[2], got[4], got[5]], [want[0], want[1], want[2], want[4], want[5]]):
         _same(g, w)
     assert struct.unpack("<Q", got[0].get_payload()[4:12])[0] == got[0].time_usec
+
+
+def _recrc(frame: bytearray, extra: int | None = None) -> bytes:
+    """The frame with its CRC recomputed over what it now holds (pymavlink's pure-Python CRC),
+    with its message's CRC_EXTRA unless ``extra`` is given."""
+    from pymavlink.generator.mavcrc import x25crc_slow
+
+    msgid = frame[7] | (frame[8] << 8) | (frame[9] << 16)
+    if extra is None:
+        extra = mavlink.mavlink_map[msgid].crc_extra
+    crc = x25crc_slow(bytes(frame[1:-2]) + bytes([extra])).crc
+    frame[-2:] = crc.to_bytes(2, "little")
+    return bytes(frame)
+
+
+def test_plain_means_scalars_only() -> None:
+    from mavins.link.decode import _plain
+
+    assert _plain(mavlink.MAVLink_highres_imu_message) and _plain(mavlink.MAVLink_heartbeat_message)
+    assert not _plain(mavlink.MAVLink_statustext_message)  # text
+    assert not _plain(mavlink.MAVLink_attitude_quaternion_message)  # an array
+    assert not _plain(mavlink.MAVLink_named_value_float_message)  # text among scalars
+
+
+def test_a_length_field_that_disagrees_is_declined_even_with_a_good_crc() -> None:
+    frame = bytearray(_imu_frame())
+    longer = frame[:-2] + b"\x07" + frame[-2:]  # one payload byte more than the length field says
+    assert decode_one(_recrc(longer)) is None
+    assert parser().parse_buffer(_recrc(longer))[0].get_type() != "HIGHRES_IMU"
+
+
+def test_flags_with_a_good_crc() -> None:
+    """Incompatibility flags (signing) are pymavlink's to handle; compatibility flags are ignored."""
+    frame = bytearray(_imu_frame())
+    flagged = bytearray(frame)
+    flagged[2] = mavlink.MAVLINK_IFLAG_SIGNED
+    assert decode_one(_recrc(flagged)) is None
+    compat = bytearray(frame)
+    compat[3] = 0x01
+    got = decode_one(_recrc(compat))
+    assert got is not None and got._header.compat_flags == 1
+    _same(got, parser().parse_buffer(_recrc(compat))[0])
+
+
+def test_the_third_id_byte_counts() -> None:
+    """HEARTBEAT's id (0) with the top id byte set is id 65536, not a HEARTBEAT, even with a CRC
+    that HEARTBEAT's CRC_EXTRA makes good."""
+    mav = mavlink.MAVLink(None, 1, 1)
+    frame = bytearray(mav.heartbeat_encode(2, 3, 0, 0, 4).pack(mav))
+    frame[9] = 1
+    assert 65536 not in mavlink.mavlink_map
+    assert decode_one(_recrc(frame, mavlink.MAVLink_heartbeat_message.crc_extra)) is None
+
+
+def test_an_empty_payload_is_all_zero_fields() -> None:
+    """A zero-length payload (every field zero, trimmed away) decodes as pymavlink decodes it."""
+    mav = mavlink.MAVLink(None, 1, 1)
+    frame = bytearray(mav.heartbeat_encode(0, 0, 0, 0, 0, 0).pack(mav))
+    empty = bytearray(frame[:10]) + bytearray(2)
+    empty[1] = 0
+    buf = _recrc(empty)
+    assert len(buf) == 12
+    got = decode_one(buf)
+    assert got is not None and got.get_type() == "HEARTBEAT" and got.custom_mode == 0
+    _same(got, parser().parse_buffer(buf)[0])

@@ -47,12 +47,9 @@ def decode_one(data: bytes) -> mavlink.MAVLink_message | None:
     cls, extra, unpacker, orders = entry
     end = n - 2
     crc = data[end] | (data[end + 1] << 8)
-    if _mcrf4xx(data[1:end] + extra, 0xFFFF) != crc:
+    if _mcrf4xx(data[1:end] + extra) != crc:  # initial value 0xFFFF, as MCRF4XX defines it
         return None
-    size = unpacker.size  # type: ignore[attr-defined]
-    payload = data[_HEADER:end]
-    if len(payload) < size:
-        payload += bytes(size - len(payload))  # MAVLink 2 trims trailing zero bytes
+    payload = data[_HEADER:end].ljust(unpacker.size, b"\0")  # type: ignore[attr-defined]  # MAVLink 2 trims trailing zeros
     t = unpacker.unpack_from(payload)  # type: ignore[attr-defined]
     m = cls(*[t[i] for i in orders])
     buf = bytearray(data)
