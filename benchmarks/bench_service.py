@@ -727,8 +727,8 @@ def cpu_bare(seconds: float, rate: float = 1000.0) -> tuple[float, float]:
     return 100.0 * (u1 + s1 - u0 - s0) / (w1 - w0), 100.0 * (s1 - s0) / (w1 - w0)
 
 
-def cpu_run(seconds: float, rerun: Path | None, rate: float = 1000.0) -> dict:
-    """Service CPU % of one core over a steady window at ``rate`` input, 50 Hz output."""
+def cpu_run(seconds: float, rerun: Path | None, rate: float = 1000.0, out_rate: float = 50.0) -> dict:
+    """Service CPU % of one core over a steady window at ``rate`` input, ``out_rate`` Hz output."""
     gyro, accel = static_imu()
     port = free_udp_port()
     settle = ALIGN_S + 2.0
@@ -737,7 +737,7 @@ def cpu_run(seconds: float, rerun: Path | None, rate: float = 1000.0) -> dict:
         [sys.executable, str(Path(__file__).resolve()), "--sender", str(port), repr(rate), repr(total),
          *map(repr, gyro), *map(repr, accel)],
         stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=ROOT)
-    args = ["--rate", "50"] + (["--rerun", str(rerun)] if rerun is not None else [])
+    args = ["--rate", f"{out_rate:g}"] + (["--rerun", str(rerun)] if rerun is not None else [])
     svc = ServiceProc(port, args, max_duration=total + 60)
     try:
         assert sender.stdout is not None and sender.stdin is not None
@@ -1507,6 +1507,12 @@ def main(argv: Sequence[str] = ()) -> list[dict]:
                              ratio=without["cpu_pct"] / bare if bare > 0 else None, baseline=base,
                              note=f"kernel {without['sys_pct']:.1f} %, RSS {without['rss1']:.0f} MB, "
                                   f"loss {without['sent'] - without['accepted']}"))
+            log("CPU at 1 kHz, 1 Hz output, without Rerun (what the output sets cost)")
+            quiet = cpu_run(args.cpu_seconds, None, out_rate=1.0)
+            rows.append(_row("CPU at 1 kHz in, 1 Hz out, no Rerun", seconds=quiet["window_s"],
+                             value=f"{quiet['cpu_pct']:.1f} % of a core",
+                             ratio=quiet["cpu_pct"] / bare if bare > 0 else None, baseline=base,
+                             note=f"kernel {quiet['sys_pct']:.1f} %; the 50 Hz row minus this is the output sets' cost"))
             rows.append(_row("CPU baseline: bare Python UDP receiver, 1 kHz", seconds=args.cpu_seconds,
                              value=f"{bare:.1f} % of a core", ratio=1.0, baseline="(is the baseline)",
                              note=f"kernel {bare_sys:.1f} %; select + recvmsg + parse_buffer, nothing else"))

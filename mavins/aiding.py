@@ -81,7 +81,7 @@ class LiveFilter:
         self.glitch = False
         self.gnss_seen = False
         self.gnss_lost = False
-        self._w_ib = np.zeros(3)
+        self._w_ib = (0.0, 0.0, 0.0)  # body rate (rad/s) at the last attitude update, bias removed
         self._t_prev_k = 0.0
 
     # -- lifecycle ---------------------------------------------------------------
@@ -145,7 +145,7 @@ class LiveFilter:
             T = tk - self._t_prev_k
             self._t_prev_k = tk
             if T > 0.0:
-                self._w_ib = np.array(w) - self.gyro_bias
+                self._w_ib = self.body_rate(w)
             if self._pending:
                 due = [p for p in self._pending if p[0] <= tk]
                 self._pending = [p for p in self._pending if p[0] > tk]
@@ -157,6 +157,13 @@ class LiveFilter:
     def gyro_bias(self) -> np.ndarray:
         """Gyro bias estimate (rad/s, body): constant plus Gauss-Markov part."""
         return self.bias[kalman.B_BG:kalman.B_BG + 3] + self.bias[kalman.B_GG:kalman.B_GG + 3]
+
+    def body_rate(self, w: tuple) -> tuple[float, float, float]:
+        """A raw gyro reading (rad/s, body) minus the gyro bias estimate, as floats: the same
+        arithmetic as ``w - gyro_bias`` without building arrays (once per attitude update)."""
+        b = self.bias.tolist()
+        g, m = kalman.B_BG, kalman.B_GG
+        return (w[0] - (b[g] + b[m]), w[1] - (b[g + 1] + b[m + 1]), w[2] - (b[g + 2] + b[m + 2]))
 
     @property
     def accel_bias(self) -> np.ndarray:
@@ -201,7 +208,7 @@ class LiveFilter:
             self.glitch = not ok
             if vel is not None:
                 self._update(s, cfg, "gnss_vel", ("vel",), kalman.gnss_velocity(
-                    s, np.asarray(vel, dtype=float), self._w_ib, self.lever, late, max(tk - self.sums[6], 1e-3),
+                    s, np.asarray(vel, dtype=float), np.array(self._w_ib), self.lever, late, max(tk - self.sums[6], 1e-3),
                     sig_vel))
         elif kind == "baro":
             h, sigma = args

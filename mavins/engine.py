@@ -267,8 +267,7 @@ class Engine:
         r = flt.push(s, self._kcfg, smp.t, smp.gyro, smp.accel)  # type: ignore[arg-type]
         if r != 1:
             return None
-        bg = flt.gyro_bias  # the body rate of the update's last sample, bias removed (published, ZUPT)
-        self._gyro_last = (smp.gyro[0] - bg[0], smp.gyro[1] - bg[1], smp.gyro[2] - bg[2])
+        self._gyro_last = flt.body_rate(smp.gyro)  # the update's last sample, bias removed (published, ZUPT)
         self._aid_from_sample(smp)
         t = sd.state_time(s)  # type: ignore[arg-type]
         if not self.degraded and sd.frame_limit(s) is not None:  # type: ignore[arg-type]

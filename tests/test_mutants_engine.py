@@ -846,3 +846,20 @@ def test_zero_velocity_updates_exactly(case):
         assert zupts == [0.5, 0.625, 0.75]
     else:
         assert zupts == []
+
+
+def test_body_rate_is_the_raw_rate_minus_both_gyro_bias_parts_to_the_bit() -> None:
+    """LiveFilter.body_rate (floats, per attitude update) equals numpy's w - (constant + Gauss-Markov
+    bias) bit for bit, and uses neither the accelerometer parts nor another axis."""
+    from mavins.aiding import LiveFilter
+    from mavins.core import kalman
+
+    flt = LiveFilter(FilterSettings(spec="consumer"))
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        flt.bias[:] = rng.normal(0.0, 1e-2, flt.bias.size)
+        w = tuple(float(x) for x in rng.normal(0.0, 0.5, 3))
+        want = np.array(w) - (flt.bias[kalman.B_BG:kalman.B_BG + 3] + flt.bias[kalman.B_GG:kalman.B_GG + 3])
+        got = flt.body_rate(w)
+        assert all(type(x) is float for x in got)
+        assert np.array_equal(np.array(got), want)
