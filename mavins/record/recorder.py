@@ -261,9 +261,8 @@ class Recorder:
                 self._traj_stride *= 2
         if t - self._traj_last >= TRAJ_EVERY_S and len(self._traj) > 1:
             self._traj_last = t
-            self.rec.set_time("sensor_time", duration=t)
-            self.rec.log("/world/trajectory/estimated",
-                         self.rr.LineStrips3D([np.array(self._traj)], colors=[COLORS["estimated"]], radii=_line_radius()))
+            self._send_row("/world/trajectory/estimated", t, self.rr.LineStrips3D.columns(
+                strips=[np.array(self._traj)], colors=[COLORS["estimated"]], radii=[_line_radius()]))
 
     def on_event(self, t: float | None, level: str, text: str) -> None:
         """A state change or warning into the text log."""
@@ -293,8 +292,16 @@ class Recorder:
         if len(self._gnss) > TRAJ_POINTS:
             self._gnss = self._gnss[::2]
         if len(self._gnss) % 10 == 1:
-            self.rec.set_time("sensor_time", duration=t)
-            self.rec.log("/world/gnss", self.rr.Points3D(self._gnss, colors=[[255, 60, 200]], radii=0.4))
+            self._send_row("/world/gnss", t, self.rr.Points3D.columns(
+                positions=self._gnss, colors=[[255, 60, 200]] * len(self._gnss),
+                radii=[0.4] * len(self._gnss)).partition([len(self._gnss)]))
+
+    def _send_row(self, path: str, t: float, columns: object) -> None:
+        """One row of a growing geometry (the whole strip or point set so far) at sensor time t (s),
+        as a chunk of its own: the Rerun 0.41 viewer may draw nothing at the end of the run when
+        such rows share a chunk (the batcher groups them by wall-clock timing), so they never do."""
+        self.rec.send_columns(path, indexes=[self.rr.TimeColumn("sensor_time", duration=[t])],
+                              columns=columns)  # type: ignore[arg-type]
 
     def on_fdi(self, t: float, sensor: str, statistic: float, threshold: float, residuals: np.ndarray) -> None:
         """One FDI window test of ``--imus`` (docs/redundancy.md): statistic and threshold, and each
