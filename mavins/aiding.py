@@ -83,12 +83,20 @@ class LiveFilter:
         self.gnss_lost = False
         self._w_ib = (0.0, 0.0, 0.0)  # body rate (rad/s) at the last attitude update, bias removed
         self._t_prev_k = 0.0
+        self._bind(sd.GEOGRAPHIC)
+
+    def _bind(self, frame: int) -> None:
+        """The kernels of the live path compiled for ``frame`` (strapdown.kernel_frame), bound once."""
+        self._push_kernel = for_frame(aided.push_rate_aided, frame)
+        self._flush_kernel = for_frame(aided.flush_propagation, frame)
+        self._position_kernel = for_frame(sd.position, frame)
 
     # -- lifecycle ---------------------------------------------------------------
-    def start(self, s: np.ndarray, gyro_bias: np.ndarray, dt_sample: float, samples: int,
+    def start(self, s: np.ndarray, cfg: np.ndarray, gyro_bias: np.ndarray, dt_sample: float,
               sigma_pos: float | None = None, heading_source: str = "--heading", lat: float = 0.0,
               bias_window_s: float = 0.0) -> None:
-        """Begin at the end of the alignment: P from the settings and the alignment's sources,
+        """Begin at the end of the alignment, for the strapdown configuration cfg (its frame and
+        samples per update): P from the settings and the alignment's sources,
         the gyro bias from the rest window (``bias_window_s`` > 0: a zero-rate calibration over
         that many seconds, whose 1-sigma replaces the spec's turn-on sigma)."""
         st = self.settings
@@ -110,7 +118,9 @@ class LiveFilter:
         self.sums[:] = 0.0
         self.sums[6] = sd.state_time(s)
         self._t_prev_k = sd.state_time(s)
+        samples = int(cfg[sd.CFG_SAMPLES])
         self.predict_every = max(1, int(round(st.predict_dt / max(dt_sample * samples, 1e-6))))
+        self._bind(sd.kernel_frame(cfg))
         self._pending.clear()
         self.ratios.clear()
         self.last_pos_t = self.last_hgt_t = -math.inf
@@ -138,8 +148,8 @@ class LiveFilter:
     def push(self, s: np.ndarray, cfg: np.ndarray, t: float, w: tuple, f: tuple) -> int:
         """One IMU sample (rad/s, m/s^2, FRD, raw): strapdown plus filter; 1 when an attitude
         update completed (pending measurements whose time it passed are then applied)."""
-        r = for_frame(aided.push_rate_aided, sd.kernel_frame(cfg))(s, cfg, self.spec, self.P, self.bias, self.acc, self.sums, t,
-                                  w[0], w[1], w[2], f[0], f[1], f[2], self.predict_every)
+        r = self._push_kernel(s, cfg, self.spec, self.P, self.bias, self.acc, self.sums, t,
+                              w[0], w[1], w[2], f[0], f[1], f[2], self.predict_every)
         if r == 1:
             tk = sd.state_time(s)
             T = tk - self._t_prev_k
@@ -188,9 +198,8 @@ class LiveFilter:
     def _apply(self, s: np.ndarray, cfg: np.ndarray, t_m: float, kind: str, args: tuple) -> None:
         tk = sd.state_time(s)
         late = max(0.0, tk - t_m)
-        frame = sd.kernel_frame(cfg)
-        for_frame(aided.flush_propagation, frame)(s, cfg, self.spec, self.P, self.acc)
-        position = for_frame(sd.position, frame)
+        self._flush_kernel(s, cfg, self.spec, self.P, self.acc)
+        position = self._position_kernel
         if kind == "gnss":
             lat, lon, h, vel, sig_h, sig_v, sig_vel = args
             lat0, lon0, _ = position(s, cfg)
@@ -263,7 +272,7 @@ def warm_measurements() -> None:
     cfg = sd.make_config()
     s = rest_state()
     f = LiveFilter(FilterSettings(aiding=AIDING_KINDS))
-    f.start(s, np.zeros(3), 0.01, 2)
+    f.start(s, cfg, np.zeros(3), 0.01)
     for kind, args in (("zupt", ()), ("gnss", (45.0, 7.0, 100.0, (0.0, 0.0, 0.0), 1.0, 2.0, 0.3)),
                        ("baro", (100.0, 0.5)), ("mag", ((0.2, 0.0, 0.4),))):
         f.measure(s, cfg, 0.0, kind, *args)

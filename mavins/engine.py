@@ -13,6 +13,7 @@ import math
 from collections import Counter
 from dataclasses import dataclass, field
 from enum import Enum
+from typing import Callable
 
 import numpy as np
 
@@ -87,6 +88,7 @@ class Engine:
     heading_used: str = ""
     degraded: bool = False
     _kcfg: np.ndarray = field(init=False)
+    _solution_row: Callable = field(init=False)  # strapdown.solution_row for the configured frame
     _s: np.ndarray | None = field(init=False, default=None)
     _pos: tuple[float, float, float] | None = field(init=False, default=None)
     _pos_sigma: float | None = field(init=False, default=None)
@@ -113,6 +115,7 @@ class Engine:
         # one declination for the alignment and the filter's magnetometer updates
         self.filter = LiveFilter(dataclasses.replace(self.cfg.filter, declination=self.cfg.declination))
         self._kcfg = sd.make_config(**strapdown_of(self.cfg).keywords())
+        self._solution_row = for_frame(sd.solution_row, sd.kernel_frame(self._kcfg))
         if self.cfg.frame != "geographic" and self.cfg.filter.aiding:
             raise ValueError(f"--frame {self.cfg.frame} navigates free inertial only (the filter works in the "
                              "geographic frame): add --aiding none")
@@ -234,9 +237,8 @@ class Engine:
             f"aligned over {smp.t - self._t_align0:.1f} s: roll {math.degrees(roll):.2f} pitch "
             f"{math.degrees(pitch):.2f} heading {math.degrees(yaw):.2f} deg from {source}",
         )
-        self.filter.start(self._s, self.gyro_bias, self._dt_nominal or 0.01, int(self._kcfg[sd.CFG_SAMPLES]),
-                          self._pos_sigma, source, math.radians(lat),
-                          smp.t - self._t_align0 if self.gyro_bias.any() else 0.0)
+        self.filter.start(self._s, self._kcfg, self.gyro_bias, self._dt_nominal or 0.01, self._pos_sigma, source,
+                          math.radians(lat), smp.t - self._t_align0 if self.gyro_bias.any() else 0.0)
         self._still_since = None
         self._next_zupt = self._next_mag = -math.inf
         if self.gyro_bias.any():
@@ -279,7 +281,7 @@ class Engine:
         flt.events.clear()
         if not self._output_due(t):
             return None
-        for_frame(sd.solution_row, sd.kernel_frame(self._kcfg))(s, self._kcfg, self._row)
+        self._solution_row(s, self._kcfg, self._row)
         r = self._row
         if not np.all(np.isfinite(r)) or abs(r[3]) > MAX_HEIGHT or abs(r[4]) + abs(r[5]) + abs(r[6]) > MAX_SPEED:
             # e.g. hours of extreme input: never publish it, start over
