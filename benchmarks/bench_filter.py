@@ -459,6 +459,14 @@ def _pipeline(init: dict, aiding: tuple[str, ...]) -> Any:
     return Pipeline(cfg)
 
 
+def _messages(frame: bytes, p: Any) -> list:
+    """What UdpLink.receive makes of one datagram: decode_one's message, else pymavlink's parser ``p``."""
+    from mavins.link.decode import decode_one
+
+    one = decode_one(frame)
+    return [one] if one is not None else p.parse_buffer(frame) or []
+
+
 def live_cost(seconds: float, repeat: int) -> dict[str, Any]:
     """Seconds per IMU sample of Pipeline.handle at 1 kHz (filter on, GNSS 5 Hz), with and without parsing."""
     from mavins.link.mavlink import parser
@@ -496,22 +504,17 @@ def live_cost(seconds: float, repeat: int) -> dict[str, Any]:
             res["final_error_m"] = _final_error(last.row, run)  # type: ignore[union-attr]
     # decode + handle (what the service does per datagram, without the socket: UdpLink.receive
     # decodes a one-frame datagram with decode_one, anything else with pymavlink's parser)
-    from mavins.link.decode import decode_one
-
     best = math.inf
     for _ in range(repeat):
         pipe = _pipeline(init, ("gnss",))
         p = parser()
         for b in frames[:k0]:
-            one = decode_one(b)
-            for m in [one] if one is not None else p.parse_buffer(b) or []:
+            for m in _messages(b, p):
                 pipe.handle(m)
         start = time.perf_counter()
         handle = pipe.handle
-        parse = p.parse_buffer
         for b in frames[k0:]:
-            one = decode_one(b)
-            for m in [one] if one is not None else parse(b) or []:
+            for m in _messages(b, p):
                 out = handle(m)
                 if out is not None:
                     last = out
@@ -600,7 +603,6 @@ def profile_live(seconds: float) -> list[str]:
     import cProfile
     import pstats
 
-    from mavins.link.decode import decode_one
     from mavins.link.mavlink import parser
 
     frames, times, init, _ = live_frames(seconds)
@@ -608,14 +610,12 @@ def profile_live(seconds: float) -> list[str]:
     pipe = _pipeline(init, ("gnss",))
     p = parser()
     for b in frames[:k0]:
-        one = decode_one(b)
-        for m in [one] if one is not None else p.parse_buffer(b) or []:
+        for m in _messages(b, p):
             pipe.handle(m)
     prof = cProfile.Profile()
     prof.enable()
     for b in frames[k0:]:
-        one = decode_one(b)
-        for m in [one] if one is not None else p.parse_buffer(b) or []:
+        for m in _messages(b, p):
             pipe.handle(m)
     prof.disable()
     stats = pstats.Stats(prof).stats  # type: ignore[attr-defined]

@@ -366,8 +366,8 @@ class Service:
                         self._handle(msg, addr)
                 self._periodic()
                 if n < BATCH:
-                    # the socket is empty (receive read until it was): wait for the next datagram
-                    # here rather than ask it again, one read and one wake-up per datagram at kHz rates
+                    # receive took what was waiting (a UDP link reads until the socket is empty): wait
+                    # here for more rather than ask again, one read and one wake-up per datagram at kHz
                     if fd is not None:
                         select.select([fd], [], [], 0.05)
                     else:
