@@ -863,3 +863,20 @@ def test_body_rate_is_the_raw_rate_minus_both_gyro_bias_parts_to_the_bit() -> No
         got = flt.body_rate(w)
         assert all(type(x) is float for x in got)
         assert np.array_equal(np.array(got), want)
+
+
+@pytest.mark.parametrize("frame", ["free", "inertial"])
+def test_published_row_is_the_configured_frames(frame: str) -> None:
+    """The solution row comes from the configured frame's kernel: at rest with exact inputs every
+    frame reports the true NED attitude and the start position. (The geographic form read from a
+    free-azimuth state is off by the wander angle, Omega sin L t = 1.6e-4 rad after 3 s; from an
+    inertial state it is not a position at all.)"""
+    e = Engine(cfg(heading=30.0, frame=frame))
+    t = align(e)
+    assert e.state is State.NAVIGATING
+    rows, _ = nav_rows(e, t, 300)
+    r = rows[-1].row
+    assert r[0] > t + 2.5
+    np.testing.assert_allclose(r[7:10], ATT, rtol=0, atol=1e-7)
+    np.testing.assert_allclose(r[1:3], [math.radians(LAT), math.radians(LON)], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(r[4:7], 0.0, atol=1e-6)
