@@ -83,6 +83,7 @@ class LiveFilter:
         self.gnss_lost = False
         self._w_ib = (0.0, 0.0, 0.0)  # body rate (rad/s) at the last attitude update, bias removed
         self._t_prev_k = 0.0
+        self._T_k = 0.0  # s: the last attitude interval (velocity fixes are interpolated over it)
         self._bind(sd.GEOGRAPHIC)
 
     def _bind(self, frame: int) -> None:
@@ -118,6 +119,7 @@ class LiveFilter:
         self.sums[:] = 0.0
         self.sums[6] = sd.state_time(s)
         self._t_prev_k = sd.state_time(s)
+        self._T_k = 0.0
         samples = int(cfg[sd.CFG_SAMPLES])
         self.predict_every = max(1, int(round(st.predict_dt / max(dt_sample * samples, 1e-6))))
         self._bind(sd.kernel_frame(cfg))
@@ -155,6 +157,7 @@ class LiveFilter:
             T = tk - self._t_prev_k
             self._t_prev_k = tk
             if T > 0.0:
+                self._T_k = T
                 self._w_ib = self.body_rate(w)
             if self._pending:
                 due = [p for p in self._pending if p[0] <= tk]
@@ -217,8 +220,7 @@ class LiveFilter:
             self.glitch = not ok
             if vel is not None:
                 self._update(s, cfg, "gnss_vel", ("vel",), kalman.gnss_velocity(
-                    s, np.asarray(vel, dtype=float), np.array(self._w_ib), self.lever, late, max(tk - self.sums[6], 1e-3),
-                    sig_vel))
+                    s, np.asarray(vel, dtype=float), np.array(self._w_ib), self.lever, late, self._T_k, sig_vel))
         elif kind == "baro":
             h, sigma = args
             if self._update(s, cfg, "baro", ("hgt",), kalman.baro_height(s, self.bias, h, late, sigma)):
@@ -254,7 +256,9 @@ class LiveFilter:
         """1-sigma, test ratios and aiding flags at sensor time t (s)."""
         d = np.sqrt(np.maximum(np.diag(self.P), 0.0))
         x = errmodel
-        sg = np.sqrt(np.maximum(d[x.X_BG:x.X_BG + 3] ** 2 + d[x.X_GG:x.X_GG + 3] ** 2, 0.0))
+        # the estimate is the sum of the two parts: var(b + g) = P_bb + P_gg + 2 P_bg (as aided.filter_row)
+        g, m = np.arange(x.X_BG, x.X_BG + 3), np.arange(x.X_GG, x.X_GG + 3)
+        sg = np.sqrt(np.maximum(self.P[g, g] + self.P[m, m] + 2.0 * self.P[g, m], 0.0))
         return Uncertainty(
             sigma_pos=d[x.X_DP:x.X_DP + 3].copy(), sigma_vel=d[x.X_DV:x.X_DV + 3].copy(),
             sigma_att=d[x.X_PHI:x.X_PHI + 3].copy(), sigma_gyro=sg,
@@ -273,7 +277,7 @@ def warm_measurements() -> None:
     s = rest_state()
     f = LiveFilter(FilterSettings(aiding=AIDING_KINDS))
     f.start(s, cfg, np.zeros(3), 0.01)
-    for kind, args in (("zupt", ()), ("gnss", (45.0, 7.0, 100.0, (0.0, 0.0, 0.0), 1.0, 2.0, 0.3)),
+    for kind, args in (("zupt", ()), ("gnss", (math.radians(45.0), math.radians(7.0), 100.0, (0.0, 0.0, 0.0), 1.0, 2.0, 0.3)),
                        ("baro", (100.0, 0.5)), ("mag", ((0.2, 0.0, 0.4),))):
         f.measure(s, cfg, 0.0, kind, *args)
 
