@@ -366,8 +366,9 @@ class Service:
                         self._handle(msg, addr)
                 self._periodic()
                 if n < BATCH:
-                    # receive took what was waiting (a UDP link reads until the socket is empty): wait
-                    # here for more rather than ask again, one read and one wake-up per datagram at kHz
+                    # receive took what was waiting (a UDP link stops at a datagram nothing is queued
+                    # behind, or at an empty socket): wait here for more rather than ask again, one read
+                    # and one wake-up per datagram at kHz (select returns at once if more is waiting)
                     if fd is not None:
                         select.select([fd], [], [], 0.05)
                     else:

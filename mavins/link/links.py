@@ -25,6 +25,9 @@ from .mavlink import mavlink, mavutil, parser as _parser
 
 RCVBUF_BYTES = 8 * 1024 * 1024
 MAX_DATAGRAM = 65535
+# s: a datagram that waited less than this in the kernel arrived while we waited for it, so nothing
+# is queued behind it; the read stops there instead of asking again and failing (docs/performance.md)
+FRESH_S = 0.0005
 # Kernel receive timestamps (Linux: SO_TIMESTAMP = SCM_TIMESTAMP = 29, a struct timeval) and the
 # kernel's count of datagrams dropped for a full receive buffer (Linux: SO_RXQ_OVFL = 40, a uint32).
 _LINUX = sys.platform.startswith("linux")
@@ -133,6 +136,8 @@ class UdpLink:
         service does not keep up on average) the late ones are skipped. What
         is processed then stays current and evenly spread in sensor time.
         Skipped datagrams are kept in ``skipped`` (raw bytes) for the input log.
+        The read stops early at a datagram that waited under ``FRESH_S`` in the
+        kernel (nothing is queued behind it), or when the socket is empty.
         """
         out: list[tuple[mavlink.MAVLink_message, object]] = []
         n = 0
@@ -149,14 +154,17 @@ class UdpLink:
             except OSError:
                 break  # e.g. ICMP port unreachable reported on a connected-less socket
             n += 1
+            stamped = False
             for level, kind, value in anc:
                 if level != socket.SOL_SOCKET:
                     continue
                 if kind == SO_TIMESTAMP and len(value) >= 16:
                     sec, usec = struct.unpack("qq", value[:16])
                     self.age = now - (sec + usec * 1e-6)
+                    stamped = True
                 elif kind == SO_RXQ_OVFL and len(value) >= 4:
                     self.kernel_dropped = struct.unpack("I", value[:4])[0]
+            more = not (stamped and self.age < FRESH_S)
             late = self.age > max_lag
             late_seen = late_seen or late
             self._seen += 1
@@ -167,7 +175,9 @@ class UdpLink:
             one = decode_one(data)
             if one is not None:
                 out.append((one, addr))
-                continue
+                if more:
+                    continue
+                break
             msgs = self.parser.parse_buffer(data) or []
             out.extend((m, addr) for m in msgs)
             if self.parser.buf_len() > 0 or not msgs:
@@ -175,6 +185,8 @@ class UdpLink:
                 reason = "truncated frame" if msgs or self.parser.buf_len() > 0 else "no frame in datagram"
                 out.append((mavlink.MAVLink_bad_data(bytearray(data[:64]), reason), addr))
                 _reset(self.parser)
+            if not more:
+                break
         if n:
             self._late_since = (self._late_since or now) if late_seen else None
         self._adapt_thinning(kernel_before, n, max_datagrams)
