@@ -561,6 +561,19 @@ def test_late_gnss_velocity_is_interpolated_over_the_last_attitude_interval() ->
     np.testing.assert_allclose(velocity(s), [0.04, 0.0, 0.0], rtol=0, atol=1e-9)
 
 
+def test_a_late_velocity_fix_before_the_first_update_is_compared_with_the_current_velocity() -> None:
+    """Right after start there is no attitude interval to interpolate over: a velocity fix stamped 5 ms back is
+    compared with the current velocity. State v = 1 m/s north, previous-update velocity 0: a fix of 1 m/s gives
+    nu = 0 (no correction); interpolating over any interval (e.g. 1 s: 1 - 0.005 (1 - 0) = 0.995, corrected half
+    way with P = R) would not. The position fix is put where the solution was 5 ms back, so it corrects nothing."""
+    s = state(v=(1.0, 0.0, 0.0))
+    s[sd.S_VP:sd.S_VP + 3] = 0.0
+    f = live(s, p=vel_var(0.01))
+    f.measure(s, CFG, T0 - 0.005, "gnss", *fix(n=-0.005), (1.0, 0.0, 0.0), 100.0, 100.0, 0.1)  # p(t_m) = -v 5 ms
+    assert f.counters["gnss_vel_accepted"] == 1
+    np.testing.assert_allclose(velocity(s), [1.0, 0.0, 0.0], rtol=0, atol=1e-12)  # the 1 s interval: 0.9975
+
+
 def test_gnss_velocity_rejected_is_counted() -> None:
     """A velocity fix 1 m/s off with S = 0.01 + 0.01 (7 sigma) is rejected: gnss_vel_rejected, velocity kept."""
     s = state()
