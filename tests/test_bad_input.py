@@ -472,7 +472,7 @@ def test_garbage_inside_a_log_is_skipped_and_located(world: Path) -> None:
     cut = 2 * (3 + struct.calcsize("<BB4s16s64s")) + 50 * (3 + struct.calcsize("<" + IMU_FMT))  # after 50 IMU records
     (world / "junk.bin").write_bytes(b[:cut] + junk + b[cut:])
     stderr = _replay_ok(world, "junk.bin", *NAV_ARGS)
-    assert f"junk.bin: skipped 199 unreadable bytes" in stderr and f"byte {cut} (199 bytes, after sensor time" in stderr, \
+    assert "junk.bin: skipped 199 unreadable bytes" in stderr and f"byte {cut} (199 bytes, after sensor time" in stderr, \
         stderr
 
 

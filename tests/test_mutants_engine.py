@@ -634,7 +634,7 @@ def test_no_magnetometer_no_heading_update(mag):
     t = align(e, mag=False)
     for _ in range(3):
         s = rest(t, mag=False)
-        out = e.on_imu(ImuSample(s.t, s.gyro, s.accel, mag, 1, 1))
+        e.on_imu(ImuSample(s.t, s.gyro, s.accel, mag, 1, 1))
         t = round(t + DT, 9)
     assert not e.filter.counters
 

@@ -381,7 +381,6 @@ def test_random_vibration_psd_and_seed() -> None:
     hz = 200.0
     res = simulate(tr, hz)
     h = 1.0 / hz
-    tp = tt_all(res)
     # The angular lines turn the body, so the closed form of the linear lines is checked without them
     lin_only = simulate(lab().static(5.0).add_random_vibration(0.0, psd_l, band, seed=11, lines=lines), hz)
     tp5 = tt_all(lin_only)
