@@ -111,7 +111,8 @@ class UdpLink:
         self.fixed: tuple[str, int] | None = None
         try:
             if self.listen:
-                self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+                # no SO_REUSEADDR: on Linux it would let any local user's socket bind the same UDP port
+                # and take the input (docs/security.md); UDP has no TIME_WAIT, so a restart rebinds anyway
                 self.sock.bind((host, port))
             else:
                 self.fixed = (socket.gethostbyname(host), port)
@@ -136,8 +137,8 @@ class UdpLink:
         service does not keep up on average) the late ones are skipped. What
         is processed then stays current and evenly spread in sensor time.
         Skipped datagrams are kept in ``skipped`` (raw bytes) for the input log.
-        The read stops early at a datagram that waited under ``FRESH_S`` in the
-        kernel (nothing is queued behind it), or when the socket is empty.
+        The read stops early at a processed datagram that waited under ``FRESH_S``
+        in the kernel (nothing is queued behind it), or when the socket is empty.
         """
         out: list[tuple[mavlink.MAVLink_message, object]] = []
         n = 0
