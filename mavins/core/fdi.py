@@ -170,9 +170,10 @@ class ParityMonitor:
                 self.st[rd.ST_ALARM] = 0.0
                 events.append(FdiEvent(te, "recovered", self.name, -1, stat, self.threshold))
             else:
+                threshold = self.threshold  # the test's own, before the restored set's (FDI.csv contract)
                 self.active[j] = 1.0
                 self._configure()
-                events.append(FdiEvent(te, "recovered", self.name, j, stat, self.threshold))
+                events.append(FdiEvent(te, "recovered", self.name, j, stat, threshold))
         self.recent = log[: int(self.st[rd.ST_NLOG])].copy()
         if self.keep_log and self.recent.shape[0]:
             self._logs.append(self.recent)

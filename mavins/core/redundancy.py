@@ -142,9 +142,12 @@ def normal_isf(p: float) -> float:
 def chi2_quantile(q: float, dof: int, *, upper: bool = False) -> float:
     """x with P(X <= x) = q (or, with ``upper``, P(X > x) = q) for chi-square ``dof``.
 
-    Start: Wilson-Hilferty, ``x = k (1 - 2/(9k) + z sqrt(2/(9k)))^3`` (A&S 26.4.17); then Newton on the
-    log of the tail probability, ``x <- x - (log F(x) - log q) F(x) / f(x)`` with F the chosen tail and f
-    the density (A&S 26.4.1), kept inside a bracket so that it cannot leave (0, inf).
+    Start: Wilson-Hilferty, ``x = k (1 - 2/(9k) + z sqrt(2/(9k)))^3`` (A&S 26.4.17); where that is not
+    positive (a small lower-tail probability p: q, or 1 - q with ``upper``), the first term of the
+    incomplete gamma series, ``P(X <= x) ~ (x/2)^(k/2) / Gamma(k/2 + 1)`` (A&S 6.5.29), solved for x.
+    Then Newton on the log of the tail probability, ``x <- x - (log F(x) - log q) F(x) / f(x)`` with F
+    the chosen tail and f the density (A&S 26.4.1), kept inside a bracket so that it cannot leave
+    (0, inf).
     """
     if not 0.0 < q < 1.0:
         raise ValueError(f"probability must be in (0, 1), got {q!r}")
@@ -152,7 +155,10 @@ def chi2_quantile(q: float, dof: int, *, upper: bool = False) -> float:
         raise ValueError(f"degrees of freedom must be >= 1, got {dof}")
     k = float(dof)
     z = normal_isf(q) if upper else -normal_isf(q)
-    x = max(k * (1.0 - 2.0 / (9.0 * k) + z * math.sqrt(2.0 / (9.0 * k))) ** 3, 1e-300)
+    x = k * (1.0 - 2.0 / (9.0 * k) + z * math.sqrt(2.0 / (9.0 * k))) ** 3
+    if x <= 0.0:
+        p_low = 1.0 - q if upper else q
+        x = max(2.0 * math.exp((math.log(p_low) + math.lgamma(0.5 * k + 1.0)) * 2.0 / k), 1e-300)
     lo, hi = 0.0, math.inf
     target = math.log(q)
     for _ in range(300):
@@ -394,8 +400,9 @@ def monitor_run(m: np.ndarray, dt: np.ndarray, t: np.ndarray, i0: int, win: int,
     ``p^T p / (1 + v)`` against ``thr``, where ``v`` is the variance of the bias estimate ``b`` in units
     of the sensor variance (``v_k = (1 - a)^2 v_{k-1} + a^2`` for an exponential average of weight a).
     ``b`` (rate units) follows the part of ``y`` the parity space sees, ``b += a ((y - b) - H G (y - b))``
-    on the active rows, with ``a = 1/k`` during the first ``n_cal`` windows (their mean, no test) and
-    ``alpha`` afterwards; it is frozen while the statistic is over the threshold. Every sample's fused
+    on the active rows, with ``a = 1/k`` (the running mean) during the first ``n_cal`` windows (no test)
+    and for as long as ``1/k > alpha``, ``alpha`` afterwards; it is frozen while the statistic is over the
+    threshold. Every sample's fused
     estimate ``G (m - b dt)`` goes to ``fused``; each tested window appends ``(t, statistic, thr)`` to
     ``log``. A dropped sensor j is checked against the fused estimate, ``((y_j - b_j) - h_j x)^2 /
     excl_sigma_j^2`` against ``thr1``.
