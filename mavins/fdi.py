@@ -40,7 +40,7 @@ def read_imus(paths: Sequence[Path], init_t: float, rates: bool, sampled: bool) 
         if bad.size:
             i = int(bad[0])
             raise files.DataFileError(
-                f"{p}: line {i + 2}, column 't': {tab[i, 0]!r} differs from {ref[i, 0]!r} in {paths[0]} "
+                f"{p}: line {i + 2}, column 't': {float(tab[i, 0])!r} differs from {float(ref[i, 0])!r} in {paths[0]} "
                 "(the IMU files must be sampled at the same times)")
         if tab.shape[0] != ref.shape[0]:
             raise files.DataFileError(f"{p}: {tab.shape[0]} rows, {paths[0]} has {ref.shape[0]} "
@@ -48,8 +48,8 @@ def read_imus(paths: Sequence[Path], init_t: float, rates: bool, sampled: bool) 
     t = ref[:, 0]
     if not rates:
         if t[0] <= init_t:
-            raise files.DataFileError(f"{paths[0]}: line 2, column 't': first increment time {t[0]!r} is not after "
-                                      f"the initial state's t = {init_t!r} (row i covers (t[i-1], t[i]])")
+            raise files.DataFileError(f"{paths[0]}: line 2, column 't': first increment time {float(t[0])!r} is not after "
+                                      f"the initial state's t = {float(init_t)!r} (row i covers (t[i-1], t[i]])")
         keep = np.ones(t.shape[0], dtype=bool)
     else:
         keep = t >= init_t if sampled else t > init_t

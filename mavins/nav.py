@@ -77,8 +77,8 @@ def run_nav(imu_path: Path, init_path: Path, out_path: Path, opts: NavOptions) -
                 for table in reader.chunks():
                     if first and opts.input == "increments" and table[0, 0] <= init.t:
                         raise files.DataFileError(
-                            f"{imu_path}: line 2, column 't': first increment time {table[0, 0]!r} is not after "
-                            f"the initial state's t = {init.t!r} (row i covers (t[i-1], t[i]])"
+                            f"{imu_path}: line 2, column 't': first increment time {float(table[0, 0])!r} is not after "
+                            f"the initial state's t = {float(init.t)!r} (row i covers (t[i-1], t[i]])"
                         )
                     first = False
                     t1 = time.perf_counter()

@@ -678,3 +678,16 @@ def test_fuzz_replay_command_exit_0_or_2_and_only_complete_outputs(sample: tuple
         else:
             assert left == sorted([path.name, "out.csv"]), left
             assert out.read_text().startswith("t,lat,lon")
+
+
+def test_nav_first_increment_at_the_initial_time_is_refused_with_plain_numbers(tmp_path: Path) -> None:
+    """An increment row at the initial state's time covers (t[-1], t[0]], before the start: `mavins nav`
+    exits 2 with one line giving both times as numbers (not numpy reprs) and writes nothing."""
+    text = imu_csv(5)
+    t0 = float(text.splitlines()[1].split(",")[0])
+    (tmp_path / "imu.csv").write_text(text, encoding="utf-8")
+    (tmp_path / "init.json").write_text(json.dumps(dict(INIT, t=t0)), encoding="utf-8")
+    code, stderr = run_cli("nav", tmp_path / "imu.csv", "--init", tmp_path / "init.json", "-o", tmp_path / "nav.csv")
+    assert_refused(code, stderr, [f"imu.csv: line 2, column 't': first increment time {t0!r} is not after the "
+                                  f"initial state's t = {t0!r}"])
+    assert not (tmp_path / "nav.csv").exists()
