@@ -39,6 +39,7 @@ from mavins.imuset import ImuSet, imu_index
 from mavins.link.ingest import IngestConfig
 from mavins.link.mavlink import mavlink
 from mavins.nav import NavOptions
+import chi2_closed as cc
 
 GYRO, ACCEL, GYRO2, ACCEL2 = 1, 2, 0x20000, 0x40000  # MAV_SYS_STATUS_SENSOR_* (common.xml)
 BOTH = GYRO | ACCEL | GYRO2 | ACCEL2
@@ -48,31 +49,6 @@ SPEC = {"gyro_arw": 0.6, "accel_vrw": 0.6}  # deg/sqrt(h), m/s/sqrt(h)
 T_WIN = 0.5  # s: the monitor's window; at 2 Hz one instant a window
 SIG_G2 = (math.radians(0.6) / 60.0) ** 2 / T_WIN  # rad^2/s^2: white noise over the window
 SIG_A2 = (0.6 / 60.0) ** 2 / T_WIN
-
-
-def _dens(z: float) -> float:
-    return math.exp(-0.5 * z * z) / math.sqrt(2.0 * math.pi)
-
-
-def _q3(x: float) -> float:
-    return math.erfc(math.sqrt(0.5 * x)) + 2.0 * _dens(math.sqrt(x)) * math.sqrt(x)  # A&S 26.4.4
-
-
-def _q5(x: float) -> float:
-    r = math.sqrt(x)
-    return math.erfc(r / math.sqrt(2.0)) + 2.0 * _dens(r) * (r + r**3 / 3.0)  # A&S 26.4.4
-
-
-def _q6(x: float) -> float:
-    return math.exp(-0.5 * x) * (1.0 + 0.5 * x + x * x / 8.0)  # A&S 26.4.5
-
-
-def _upper(tail, p: float) -> float:
-    lo, hi = 0.0, 1000.0
-    for _ in range(200):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if tail(mid) > p else (lo, mid)
-    return 0.5 * (lo + hi)
 
 
 def wire(make, sysid: int = 1, compid: int = 1):
@@ -171,7 +147,7 @@ def test_isolations_and_recoveries_are_announced(three):
     included; the recoveries 20 windows (10 s) after the faults end are INFO, with the threshold of the
     set without the sensor (5 dof)."""
     s, rec = three
-    thr6 = _upper(_q6, 1e-6)
+    thr6 = cc.upper(cc.q6, 1e-6)
 
     def text(t, who, stat):
         return f"FDI at t={t} s: {who} isolated (statistic {stat:.4g}, threshold {thr6:.4g})"
@@ -185,7 +161,7 @@ def test_isolations_and_recoveries_are_announced(three):
                         ("WARNING", text("16.500", "IMU 3 accel y", sa / (1 + v13)))]
     assert told[40] == [("WARNING", text("30.000", "IMU 0 gyro x", sg / (1 + v40))),
                         ("WARNING", text("30.000", "IMU 1 accel z", sa / (1 + v40)))]
-    thr5 = f"{_upper(_q5, 1e-6):.4g}"
+    thr5 = f"{cc.upper(cc.q5, 1e-6):.4g}"
     assert [lv for lv, _ in told[36]] == ["INFO", "INFO"]
     for (_, line), sensor in zip(told[36], ("IMU 1 gyro x", "IMU 3 accel y")):
         assert re.fullmatch(rf"FDI at t=28\.000 s: {sensor} recovered \(statistic [-+.e0-9]+, threshold {thr5}\)",
@@ -201,7 +177,7 @@ def test_window_tests_are_reported_once(three):
     """No test during the 5 s calibration (windows 1 to 10), then one per sensor and window: its time,
     the statistic (0 without fault), the threshold and the nine residuals; each drained once."""
     s, rec = three
-    thr6 = _upper(_q6, 1e-6)
+    thr6 = cc.upper(cc.q6, 1e-6)
     assert all(r["tests"] == [] for r in rec[:11])
     for k in (11, 12, 13):
         tests = rec[k]["tests"]
@@ -235,7 +211,7 @@ def test_two_imus_detect_without_isolating():
     faults = {(1, k): ((0.0, 0.0, FG), (0.0,) * 3) for k in (13, 14)}
     faults[(0, 20)] = ((0.0,) * 3, (FA, 0.0, 0.0))
     rec = run_instants(s, 41, faults)
-    thr3 = _upper(_q3, 1e-3)
+    thr3 = cc.upper(cc.q3, 1e-3)
     sg = FG**2 * 0.5 / SIG_G2 / (1 + bias_variance(13, ()))
     sa = FA**2 * 0.5 / SIG_A2 / (1 + bias_variance(20, ()))
     told = {k: r["events"] for k, r in enumerate(rec) if r["events"]}
@@ -627,7 +603,7 @@ def test_nav_fdi_isolates_and_navigates_on_the_rest(tmp_path, rates, sampled):
                                 spec={"gyro_arw": 0.6, "accel_vrw": 0.6}, false_alarm=1e-6)
     cover, t_det = (0.8, 5.9) if sampled else (1.0, 6.0)
     stat = (cover * FY) ** 2 * (2 / 3) * (11 / 12) / SIG_A2
-    thr6 = _upper(_q6, 1e-6)
+    thr6 = cc.upper(cc.q6, 1e-6)
     assert [(e.event, e.sensor, e.imu, e.axis) for e in events] == [("detected", "accel", None, ""),
                                                                      ("isolated", "accel", 2, "y")]
     lines = log.read_text().splitlines()
@@ -655,7 +631,7 @@ def test_nav_fdi_window_false_alarm_and_default_samples(tmp_path):
                                 strapdown={"earth_model": "none"}, spec=SPEC, false_alarm=1e-3, window=1.0)
     assert m == 40 and [(e.event, e.t) for e in events] == [("detected", 6.0), ("isolated", 6.0)]
     assert events[0].statistic == pytest.approx((FY / 2) ** 2 * (2 / 3) * (5 / 6) / (0.6 / 60) ** 2, rel=1e-9)
-    assert events[0].threshold == pytest.approx(_upper(_q6, 1e-3), rel=1e-12)
+    assert events[0].threshold == pytest.approx(cc.upper(cc.q6, 1e-3), rel=1e-12)
     sol = np.loadtxt(out, delimiter=",", skiprows=1)
     assert sol[-1, 9] == pytest.approx(math.degrees(0.05 * 8.0), abs=1e-9)
 

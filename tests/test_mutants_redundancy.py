@@ -29,50 +29,11 @@ import pytest
 from mavins.core import redundancy as rd
 from mavins.core.errmodel import ImuSpec
 from mavins.core.fdi import ImuSetMonitor, ParityMonitor
-
-
-def _dens(z: float) -> float:
-    return math.exp(-0.5 * z * z) / math.sqrt(2.0 * math.pi)
-
-
-def _phi(z: float) -> float:
-    return 0.5 * math.erfc(-z / math.sqrt(2.0))
-
-
-def _q1(x: float) -> float:
-    """Chi-square upper tail, 1 dof: P(Z^2 > x) = erfc(sqrt(x/2)) (A&S 26.4.4)."""
-    return math.erfc(math.sqrt(0.5 * x))
-
-
-def _q2(x: float) -> float:
-    return math.exp(-0.5 * x)  # A&S 26.4.5
-
-
-def _q3(x: float) -> float:
-    return math.erfc(math.sqrt(0.5 * x)) + 2.0 * _dens(math.sqrt(x)) * math.sqrt(x)  # A&S 26.4.4
-
-
-def _p3(x: float) -> float:
-    return math.erf(math.sqrt(0.5 * x)) - 2.0 * _dens(math.sqrt(x)) * math.sqrt(x)  # 1 - Q for 3 dof
-
-
-def _log_q10(x: float) -> float:
-    """log Q(x | 10) = -x/2 + log(sum_(r<5) (x/2)^r / r!) (A&S 26.4.5), in logs where Q underflows."""
-    u = 0.5 * x
-    return -u + math.log(sum(u**r / math.factorial(r) for r in range(5)))
-
-
-def _upper(tail, p: float) -> float:
-    """x with tail(x) = p, by bisection on a closed-form tail (to the last bit)."""
-    lo, hi = 0.0, 1000.0
-    for _ in range(200):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if tail(mid) > p else (lo, mid)
-    return 0.5 * (lo + hi)
+import chi2_closed as cc
 
 
 P_FA = 1e-6
-THR1, THR2, THR3 = _upper(_q1, P_FA), -2.0 * math.log(P_FA), _upper(_q3, P_FA)
+THR1, THR2, THR3 = cc.upper(cc.q1, P_FA), -2.0 * math.log(P_FA), cc.upper(cc.q3, P_FA)
 
 
 def _turn(axis: tuple[float, float, float], angle: float) -> np.ndarray:
@@ -182,7 +143,7 @@ def test_chi2_quantile_lower_tails_and_small_quantiles() -> None:
         assert math.erf(math.sqrt(0.5 * x1)) == pytest.approx(q, rel=1e-12)
     for q in (0.9, 0.999999):
         assert rd.chi2_quantile(q, 2, upper=True) == pytest.approx(-2.0 * math.log(q), rel=1e-12)
-        assert _q1(rd.chi2_quantile(q, 1, upper=True)) == pytest.approx(q, rel=1e-12)
+        assert cc.q1(rd.chi2_quantile(q, 1, upper=True)) == pytest.approx(q, rel=1e-12)
     for q in (0.1, 0.5, 0.9):
         x4 = rd.chi2_quantile(q, 4)
         assert 1.0 - math.exp(-0.5 * x4) * (1.0 + 0.5 * x4) == pytest.approx(q, rel=1e-12)
@@ -195,9 +156,9 @@ def test_chi2_quantile_far_tails_against_closed_forms() -> None:
     1 dof erf(sqrt(x/2)) = q."""
     lq = math.log(1e-300)
     assert rd.chi2_quantile(1e-300, 2, upper=True) == pytest.approx(-2.0 * lq, rel=1e-12)
-    assert math.log(_q1(rd.chi2_quantile(1e-300, 1, upper=True))) == pytest.approx(lq, abs=1e-9)
-    assert math.log(_q3(rd.chi2_quantile(1e-300, 3, upper=True))) == pytest.approx(lq, abs=1e-9)
-    assert _log_q10(rd.chi2_quantile(1e-300, 10, upper=True)) == pytest.approx(lq, abs=1e-9)
+    assert math.log(cc.q1(rd.chi2_quantile(1e-300, 1, upper=True))) == pytest.approx(lq, abs=1e-9)
+    assert math.log(cc.q3(rd.chi2_quantile(1e-300, 3, upper=True))) == pytest.approx(lq, abs=1e-9)
+    assert cc.log_q10(rd.chi2_quantile(1e-300, 10, upper=True)) == pytest.approx(lq, abs=1e-9)
     for q in (1e-100, 1e-300):
         assert rd.chi2_quantile(q, 2) == pytest.approx(-2.0 * math.log1p(-q), rel=1e-12)
     assert math.erf(math.sqrt(0.5 * rd.chi2_quantile(1e-100, 1))) == pytest.approx(1e-100, rel=1e-12)
@@ -208,7 +169,7 @@ def test_chi2_lower_quantiles_of_small_probabilities() -> None:
     q = 1e-9 at u = 4.5e-5; for 3 dof erf(sqrt(x/2)) - 2 phi(sqrt x) sqrt x = q (A&S 26.4.4), q = 1e-6."""
     u = 0.5 * rd.chi2_quantile(1e-9, 4)
     assert u * u / 2.0 - u**3 / 3.0 + u**4 / 8.0 == pytest.approx(1e-9, rel=1e-9)
-    assert _p3(rd.chi2_quantile(1e-6, 3)) == pytest.approx(1e-6, rel=1e-9)
+    assert cc.p3(rd.chi2_quantile(1e-6, 3)) == pytest.approx(1e-6, rel=1e-9)
 
 
 def test_chi2_quantiles_deep_in_the_lower_tail() -> None:
@@ -231,14 +192,14 @@ def test_chi2_upper_quantiles_of_probabilities_near_one() -> None:
     = 1e-4 (A&S 26.4.4); the design false-alarm probability of a two-IMU set (3 dof) may be any value
     in (0, 1)."""
     q = 0.9999
-    assert _p3(rd.chi2_quantile(q, 3, upper=True)) == pytest.approx(1.0 - q, rel=1e-9)
+    assert cc.p3(rd.chi2_quantile(q, 3, upper=True)) == pytest.approx(1.0 - q, rel=1e-9)
 
 
 def _ncx2_cdf_3(x: float, lam: float) -> float:
     """P(|z + mu|^2 <= x), z ~ N(0, I_3), |mu|^2 = lam: with s = sqrt x, a = sqrt lam, the radial density
     (r/a)(phi(r - a) - phi(r + a)) integrates to Phi(s - a) - Phi(-s - a) - (phi(s - a) - phi(s + a))/a."""
     s, a = math.sqrt(x), math.sqrt(lam)
-    return _phi(s - a) - _phi(-s - a) - (_dens(s - a) - _dens(s + a)) / a
+    return cc.phi(s - a) - cc.phi(-s - a) - (cc.dens(s - a) - cc.dens(s + a)) / a
 
 
 def test_noncentral_chi2_and_detection_probability_for_three_dof() -> None:
