@@ -460,9 +460,14 @@ class TableReader:
 
     def _numpy_chunks(self, skip: int, last_t: float | None) -> Iterator[np.ndarray]:
         """The line-by-line parser, starting after ``skip`` data rows (blank lines not counted)."""
-        if skip == 0 and self.path.suffix != ".gz" and self.path.stat().st_size <= 4 * self.chunk_bytes:
-            yield self._whole()
-            return
+        if skip == 0 and self.path.suffix != ".gz":
+            try:
+                size = self.path.stat().st_size
+            except OSError as exc:
+                raise DataFileError(f"{self.path}: cannot read: {exc.strerror or exc}") from None
+            if size <= 4 * self.chunk_bytes:
+                yield self._whole()
+                return
         path = self.path
         line0 = 2  # file line of the first line in the chunk
         try:

@@ -128,9 +128,11 @@ BARO_REQUIRED = ("t", "h")
 BARO_OPTIONAL = ("sigma",)
 
 
-def read_aiding(path: Path, required: tuple[str, ...], optional: tuple[str, ...]) -> np.ndarray:
+def read_aiding(path: Path, required: tuple[str, ...], optional: tuple[str, ...],
+                no_fix_rows: bool = False) -> np.ndarray:
     """A GNSS or baro file (docs/conventions.md "Aided navigation"): the required columns, then
-    the optional ones (NaN where absent or empty), rows sorted by t."""
+    the optional ones (NaN where absent or empty), rows sorted by t. With ``no_fix_rows`` (GNSS)
+    the required columns after t may be empty or NaN too: such a row is no fix."""
     try:
         with open(path, encoding="utf-8") as fh:
             header = [c.strip() for c in fh.readline().strip().split(",")]
@@ -140,7 +142,8 @@ def read_aiding(path: Path, required: tuple[str, ...], optional: tuple[str, ...]
     if missing:
         raise files.DataFileError(f"{path}: missing column(s) {', '.join(missing)} (header: {','.join(header)})")
     cols = required + tuple(c for c in optional if c in header)
-    data = files.read_table(path, required, strictly_increasing=False) if cols == required else None
+    strict = cols == required and not no_fix_rows  # the fast reader refuses empty and NaN cells
+    data = files.read_table(path, required, strictly_increasing=False) if strict else None
     if data is None:
         raw = np.genfromtxt(path, delimiter=",", skip_header=1, usecols=[header.index(c) for c in cols],
                             ndmin=2, invalid_raise=False)
@@ -196,7 +199,7 @@ def run_nav_aided(imu_path: Path, init_path: Path, out_path: Path, opts: NavOpti
         imu = imu[imu[:, 0] > init.t]
         dt = np.diff(np.concatenate(([init.t], imu[:, 0])))[:, None]
         imu = np.column_stack([imu[:, 0], imu[:, 1:7] * dt])
-    gnss = read_aiding(gnss_path, GNSS_REQUIRED, GNSS_OPTIONAL) if gnss_path is not None else None
+    gnss = read_aiding(gnss_path, GNSS_REQUIRED, GNSS_OPTIONAL, no_fix_rows=True) if gnss_path is not None else None
     baro = read_aiding(baro_path, BARO_REQUIRED, BARO_OPTIONAL) if baro_path is not None else None
     try:
         rows, stats = aided.navigate_aided(
