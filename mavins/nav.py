@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import sys
 import time
@@ -143,15 +144,11 @@ def read_aiding(path: Path, required: tuple[str, ...], optional: tuple[str, ...]
         raise files.DataFileError(f"{path}: missing column(s) {', '.join(missing)} (header: {','.join(header)})")
     cols = required + tuple(c for c in optional if c in header)
     strict = cols == required and not no_fix_rows  # the fast reader refuses empty and NaN cells
-    data = files.read_table(path, required, strictly_increasing=False) if strict else None
-    if data is None:
-        raw = np.genfromtxt(path, delimiter=",", skip_header=1, usecols=[header.index(c) for c in cols],
-                            ndmin=2, invalid_raise=False)
-        if raw.size == 0:
-            raw = np.empty((0, len(cols)))
-        if not np.all(np.isfinite(raw[:, 0])):
-            raise files.DataFileError(f"{path}: column 't' holds a value that is not a finite number")
-        data = raw
+    if strict:
+        data = files.read_table(path, required, strictly_increasing=False)
+    else:
+        may_be_empty = set(optional) | (set(required[1:]) if no_fix_rows else set())
+        data = _aiding_rows(path, header, cols, may_be_empty)
     if data.shape[0] and np.any(np.diff(data[:, 0]) < 0.0):
         row = int(np.argmax(np.diff(data[:, 0]) < 0.0)) + 3
         raise files.DataFileError(f"{path}: line {row}, column 't': time goes back")
@@ -159,6 +156,44 @@ def read_aiding(path: Path, required: tuple[str, ...], optional: tuple[str, ...]
     for j, c in enumerate(cols):
         out[:, (required + optional).index(c)] = data[:, j]
     return out
+
+
+def _aiding_rows(path: Path, header: list[str], cols: tuple[str, ...], may_be_empty: set[str]) -> np.ndarray:
+    """The columns ``cols`` of an aiding file, row by row: an empty or NaN cell is NaN in the columns
+    ``may_be_empty`` (absent measurement, GNSS no fix) and refused elsewhere; any other cell must be a
+    finite number, and a row must hold every column of the header (one-line errors, as files.py's)."""
+    idx = [header.index(c) for c in cols]
+    rows: list[list[float]] = []
+    try:
+        with open(path, encoding="utf-8") as fh:
+            fh.readline()
+            for lineno, line in enumerate(fh, start=2):
+                if not line.strip():
+                    continue
+                cells = line.rstrip("\r\n").split(",")
+                if len(cells) < len(header):
+                    raise files.DataFileError(f"{path}: line {lineno}: column '{header[len(cells)]}' is missing "
+                                              f"(row has {len(cells)} fields)")
+                row = []
+                for c, j in zip(cols, idx):
+                    cell = cells[j].strip()
+                    if cell == "" or cell.lower() == "nan":
+                        if c not in may_be_empty:
+                            raise files.DataFileError(
+                                f"{path}: line {lineno}, column '{c}': not a number: {cells[j]!r}")
+                        row.append(math.nan)
+                        continue
+                    try:
+                        v = float(cell)
+                    except ValueError:
+                        v = math.inf
+                    if not math.isfinite(v):
+                        raise files.DataFileError(f"{path}: line {lineno}, column '{c}': not a number: {cells[j]!r}")
+                    row.append(v)
+                rows.append(row)
+    except (OSError, UnicodeDecodeError) as exc:
+        raise files.DataFileError(f"{path}: cannot read: {getattr(exc, 'strerror', None) or exc}") from None
+    return np.array(rows, dtype=float).reshape(len(rows), len(cols))
 
 
 def run_nav_aided(imu_path: Path, init_path: Path, out_path: Path, opts: NavOptions, gnss_path: Path | None,
