@@ -614,3 +614,37 @@ def test_a_malformed_aiding_row_is_refused_whatever_the_columns(tmp_path: Path, 
     with pytest.raises(DataFileError, match=r": line 3(,|:) "):
         nav.read_aiding(p, *((nav.BARO_REQUIRED, nav.BARO_OPTIONAL) if name == "baro.csv"
                              else (nav.GNSS_REQUIRED, nav.GNSS_OPTIONAL)), no_fix_rows=name == "gnss.csv")
+
+
+def test_a_baro_height_may_not_be_empty_even_beside_an_optional_column(tmp_path: Path) -> None:
+    """Only GNSS rows may lack their measurement (no fix): a baro row with an empty or NaN height is refused
+    naming its line, with or without the optional sigma column; an empty sigma is NaN (the default applies)."""
+    for body, cell in (("t,h,sigma\n1,100,0.5\n2,,0.5\n", "''"), ("t,h,sigma\n1,100,0.5\n2,nan,0.5\n", "'nan'")):
+        p = text(tmp_path, body, "baro.csv")
+        with pytest.raises(DataFileError) as err:
+            baro(p)
+        assert str(err.value) == f"{p}: line 3, column 'h': not a number: {cell}"
+    got = baro(text(tmp_path, "t,h,sigma\n1,100,\n", "baro.csv"))
+    assert got[0, :2].tolist() == [1.0, 100.0] and math.isnan(got[0, 2])
+
+
+def test_blank_lines_are_skipped_not_the_end(tmp_path: Path) -> None:
+    """A blank line between fixes is skipped and the rows after it are read (file lines still counted: an error
+    after it names its own line)."""
+    got = gnss(text(tmp_path, "t,lat,lon,h\n1,45,7,10\n\n2,46,8,20\n"))
+    assert got[:, :4].tolist() == [[1.0, 45.0, 7.0, 10.0], [2.0, 46.0, 8.0, 20.0]]
+    p = text(tmp_path, "t,lat,lon,h\n1,45,7,10\n\n2,x,8,20\n")
+    with pytest.raises(DataFileError) as err:
+        gnss(p)
+    assert str(err.value) == f"{p}: line 4, column 'lat': not a number: 'x'"
+
+
+def test_undecodable_bytes_after_the_header_are_one_line(tmp_path: Path) -> None:
+    """A row that is not UTF-8 is refused as 'cannot read' with the decoder's reason, not a traceback: near the
+    start (found while the header is read) and 40 kB in (found while the rows are read)."""
+    for n in (1, 2000):
+        p = tmp_path / f"gnss{n}.csv"
+        p.write_bytes(b"t,lat,lon,h\n" + b"".join(b"%d,45,7,10\n" % i for i in range(1, n + 1)) + b"9999,\xff,7,10\n")
+        with pytest.raises(DataFileError) as err:
+            gnss(p)
+        assert str(err.value).startswith(f"{p}: cannot read: 'utf-8' codec can't decode byte 0xff in position ")
