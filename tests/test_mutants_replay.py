@@ -1,0 +1,880 @@
+"""Mutation-testing kills for mavins/replay.py, the log readers of ``mavins replay`` (docs/testing.md).
+
+Every log is real bytes written by hand in tmp_path from the format definitions: tlog records
+(8-byte big-endian microseconds + one MAVLink frame), ArduPilot DataFlash records (A3 95, type, the
+fields the record's FMT declares; AP_Logger LogStructure.h for the scaled format characters) and
+PX4 ULog files (header, F/A/D messages; PX4 msg/*.msg field names and units). Expected values are
+the logged values converted by hand into the MAVLink fields (common.xml: HIGHRES_IMU in SI units,
+GPS_RAW_INT lat/lon degE7, alt mm, vel cm/s, cog cdeg; SCALED_PRESSURE hPa and cdegC). Damaged logs
+put the junk at byte offsets counted by hand, so the skipped stretches and the cut are known.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from pathlib import Path
+
+import pytest
+
+from mavins import replay
+from mavins.files import DataFileError
+from mavins.link.mavlink import mavlink
+from mavins.replay import LogReport, open_log
+
+ACC_GYRO, MAG_BITS = 0b111111, 0b111000000
+
+
+def read_all(path: Path) -> tuple[list[tuple[float, object]], LogReport]:
+    it, report = open_log(path)
+    return list(it), report
+
+
+def types(msgs: list[tuple[float, object]]) -> list[str]:
+    return [m.get_type() for _, m in msgs]
+
+
+# -- DataFlash ----------------------------------------------------------------------------------
+
+FMT_LEN = 3 + 1 + 1 + 4 + 16 + 64  # FMT: Type B, Length B, Name n, Format N, Columns Z
+
+
+def df_struct(fmt: str) -> str:
+    """The struct codes of DataFlash format characters (c C e E: int16/uint16/int32/uint32 of value x 100, g half)."""
+    codes = {"c": "h", "C": "H", "e": "i", "E": "I", "L": "i", "g": "e", "n": "4s", "N": "16s", "Z": "64s"}
+    return "<" + "".join(codes.get(c, c) for c in fmt)
+
+
+def df_record(msg_type: int, fmt: str, *values: object) -> bytes:
+    return b"\xa3\x95" + bytes([msg_type]) + struct.pack(df_struct(fmt), *values)
+
+
+def df_fmt(msg_type: int, name: str, fmt: str, cols: str, length: int | None = None) -> bytes:
+    size = 3 + struct.calcsize(df_struct(fmt)) if length is None else length
+    return df_record(128, "BBnNZ", msg_type, size, name.encode(), fmt.encode(), cols.encode())
+
+
+FMT_OF_FMT = df_fmt(128, "FMT", "BBnNZ", "Type,Length,Name,Format,Columns")
+IMU_FMT, IMU_COLS = "QBffffff", "TimeUS,I,GyrX,GyrY,GyrZ,AccX,AccY,AccZ"
+GPS_FMT, GPS_COLS = "QBBBcLLeff", "TimeUS,I,Status,NSats,HDop,Lat,Lng,Alt,Spd,GCrs"
+GPA_FMT, GPA_COLS = "QBCCCC", "TimeUS,I,VDop,HAcc,VAcc,SAcc"
+BARO_FMT, BARO_COLS = "QBfc", "TimeUS,I,Press,Temp"
+MAG_FMT, MAG_COLS = "QBhhh", "TimeUS,I,MagX,MagY,MagZ"
+IMU_LEN, GPS_LEN = 3 + 8 + 1 + 6 * 4, 3 + 8 + 3 + 2 + 5 * 4  # record sizes, header included
+
+
+def df_head() -> bytes:
+    return (FMT_OF_FMT + df_fmt(130, "IMU", IMU_FMT, IMU_COLS) + df_fmt(131, "GPS", GPS_FMT, GPS_COLS)
+            + df_fmt(132, "GPA", GPA_FMT, GPA_COLS) + df_fmt(133, "BARO", BARO_FMT, BARO_COLS)
+            + df_fmt(134, "MAG", MAG_FMT, MAG_COLS))
+
+
+def df_imu(t_us: int, inst: int = 0, gyr=(0.5, -0.25, 0.125), acc=(1.5, -2.0, -9.75)) -> bytes:
+    return df_record(130, IMU_FMT, t_us, inst, *gyr, *acc)
+
+
+def df_gps(t_us: int, inst: int = 0, lat: int = 473977418, lng: int = 85455939, alt_cm: int = 48850) -> bytes:
+    return df_record(131, GPS_FMT, t_us, inst, 3, 10, 120, lat, lng, alt_cm, 2.5, 90.0)
+
+
+def write(tmp_path: Path, name: str, data: bytes) -> Path:
+    p = tmp_path / name
+    p.write_bytes(data)
+    return p
+
+
+def test_dataflash_imu_record_is_a_highres_imu_in_si_units(tmp_path: Path) -> None:
+    """IMU GyrX..Z (rad/s) and AccX..Z (m/s^2) go out unchanged, TimeUS is time_usec, I is the id."""
+    data = df_head() + df_imu(1_000_000, inst=2)
+    msgs, report = read_all(write(tmp_path, "a.bin", data))
+    assert types(msgs) == ["HIGHRES_IMU"]
+    frac, m = msgs[0]
+    assert frac == (len(data) - IMU_LEN) / len(data)
+    assert (m.time_usec, m.id, m.fields_updated) == (1_000_000, 2, ACC_GYRO)
+    assert (m.xgyro, m.ygyro, m.zgyro) == (0.5, -0.25, 0.125)
+    assert (m.xacc, m.yacc, m.zacc) == (1.5, -2.0, -9.75)
+    assert (m.xmag, m.ymag, m.zmag) == (0.0, 0.0, 0.0)
+    assert not report.damaged and report.size == len(data)
+
+
+def test_dataflash_timems_is_scaled_to_microseconds(tmp_path: Path) -> None:
+    """An IMU with TimeMS (older logs) and no instance column: time x 1000, id 0."""
+    fmt = df_fmt(130, "IMU", "Iffffff", "TimeMS,GyrX,GyrY,GyrZ,AccX,AccY,AccZ")
+    data = FMT_OF_FMT + fmt + df_record(130, "Iffffff", 1234, 0.5, 0.0, 0.0, 0.0, 0.0, -9.75)
+    msgs, _ = read_all(write(tmp_path, "a.bin", data))
+    assert [(m.time_usec, m.id, m.xgyro, m.zacc) for _, m in msgs] == [(1_234_000, 0, 0.5, -9.75)]
+
+
+@pytest.mark.parametrize("fmt, cols", [
+    ("Qhfffff", "TimeUS,GyrX,GyrY,GyrZ,AccX,AccY,AccZ"),       # integer gyro
+    ("Qffffff", "TimeUS,GyrX,GyrY,GyrZ,AccX,AccY,AccW"),       # no AccZ
+    ("Qffffff", "TimeUS,GyrX,GyrY,GyrZ,AccX,AccY"),            # fewer columns than format characters
+    ("fffffff", "TimeUS,GyrX,GyrY,GyrZ,AccX,AccY,AccZ"),       # float time
+    ("Qfffffff", "Time,GyrX,GyrY,GyrZ,AccX,AccY,AccZ,T"),      # no time column
+    ("Qffffffy", "TimeUS,GyrX,GyrY,GyrZ,AccX,AccY,AccZ,T"),    # unknown format character
+])
+def test_dataflash_imu_fmt_it_cannot_read_gives_no_imu_and_no_damage(tmp_path: Path, fmt: str, cols: str) -> None:
+    """Records of an IMU FMT without usable columns are whole records, left out silently."""
+    size = 3 + struct.calcsize("<" + fmt.replace("y", "B"))
+    rec = b"\xa3\x95\x82" + bytes(size - 3)
+    data = FMT_OF_FMT + df_fmt(130, "IMU", fmt, cols, length=size) + rec + rec
+    msgs, report = read_all(write(tmp_path, "a.bin", data))
+    assert msgs == [] and not report.damaged
+
+
+def test_dataflash_imu_fmt_with_a_wrong_length_is_not_read_as_imu(tmp_path: Path) -> None:
+    """An IMU FMT whose Length is not the format's size + 3 keeps the length but is no IMU."""
+    size = 3 + 8 + 1 + 24
+    data = FMT_OF_FMT + df_fmt(130, "IMU", IMU_FMT, IMU_COLS, length=size + 1) + df_imu(1) + b"\0"
+    msgs, report = read_all(write(tmp_path, "a.bin", data))
+    assert msgs == [] and not report.damaged
+
+
+def test_a_later_fmt_replaces_an_imu_layout(tmp_path: Path) -> None:
+    """A second FMT for the IMU type that is no IMU ends IMU reading of that type."""
+    data = df_head() + df_imu(1) + df_fmt(130, "XXX", IMU_FMT, IMU_COLS) + df_imu(2)
+    msgs, report = read_all(write(tmp_path, "a.bin", data))
+    assert [m.time_usec for _, m in msgs] == [1] and not report.damaged
+
+
+def test_dataflash_fmt_of_length_3_is_a_record_of_its_header_only(tmp_path: Path) -> None:
+    """Length 3 is the smallest record (header, no fields); Length 2 is a damaged FMT, skipped whole."""
+    ok = FMT_OF_FMT + df_fmt(140, "EV", "", "", length=3) + b"\xa3\x95\x8c" * 2 + df_head() + df_imu(5)
+    msgs, report = read_all(write(tmp_path, "a.bin", ok))
+    assert [m.time_usec for _, m in msgs] == [5] and not report.damaged
+    bad_fmt = df_fmt(140, "EV", "", "", length=2)
+    bad = FMT_OF_FMT + bad_fmt + df_head() + df_imu(5)
+    msgs, report = read_all(write(tmp_path, "b.bin", bad))
+    assert [m.time_usec for _, m in msgs] == [5]
+    assert report.skipped == [[FMT_LEN, FMT_LEN, None]]
+
+
+def test_dataflash_fmt_redefining_fmt_with_another_length_is_skipped(tmp_path: Path) -> None:
+    """An FMT for type 128 whose Length is not 89 is damage: skipped, the FMT length stays 89."""
+    bad = df_fmt(128, "FMT", "BBnNZ", "Type,Length,Name,Format,Columns", length=FMT_LEN + 1)
+    data = FMT_OF_FMT + bad + df_head()[FMT_LEN:] + df_imu(7)
+    msgs, report = read_all(write(tmp_path, "a.bin", data))
+    assert [m.time_usec for _, m in msgs] == [7]
+    assert report.skipped == [[FMT_LEN, FMT_LEN, None]]
+
+
+def test_dataflash_junk_is_skipped_to_the_next_header_and_counted(tmp_path: Path) -> None:
+    """Bytes that are no record are skipped to the next A3 95; the stretch is [start, length]."""
+    head = df_head()
+    junk = b"\x01\xa3\x02\x95\x03"
+    data = head + df_imu(1) + junk + df_imu(2) + b"\xa3\x95\x7f" + df_imu(3)
+    msgs, report = read_all(write(tmp_path, "a.bin", data))
+    assert [m.time_usec for _, m in msgs] == [1, 2, 3]
+    a = len(head) + IMU_LEN
+    b = a + len(junk) + IMU_LEN
+    assert report.skipped == [[a, 5, None], [b, 3, None]]
+    assert report.skipped_bytes == 8 and report.cut_at is None
+
+
+def test_dataflash_record_cut_by_the_end_is_reported(tmp_path: Path) -> None:
+    """A record one byte short is a cut at its first byte; one ending exactly at the end is whole."""
+    whole = df_head() + df_imu(1) + df_imu(2)
+    msgs, report = read_all(write(tmp_path, "a.bin", whole))
+    assert len(msgs) == 2 and report.cut_at is None and not report.damaged
+    msgs, report = read_all(write(tmp_path, "b.bin", whole[:-1]))
+    assert len(msgs) == 1 and report.cut_at == len(whole) - IMU_LEN and report.skipped == []
+
+
+@pytest.mark.parametrize("tail, cut", [(b"\xa3", True), (b"\xa3\x95", True), (b"\xa3\x00", False),
+                                       (b"\x00", False), (b"\x00\x95", False)])
+def test_dataflash_tail_shorter_than_a_header(tmp_path: Path, tail: bytes, cut: bool) -> None:
+    """A last 1-2 bytes that begin a header are a cut record; anything else is skipped bytes."""
+    head = df_head() + df_imu(1)
+    msgs, report = read_all(write(tmp_path, "a.bin", head + tail))
+    assert len(msgs) == 1
+    if cut:
+        assert report.cut_at == len(head) and report.skipped == []
+    else:
+        assert report.cut_at is None and report.skipped == [[len(head), len(tail), None]]
+
+
+def test_dataflash_imu_record_no_highres_imu_can_carry_is_skipped(tmp_path: Path) -> None:
+    """An IMU with instance 256 (HIGHRES_IMU id is uint8) is skipped as damage, the next one is read."""
+    fmt = df_fmt(130, "IMU", "QHffffff", IMU_COLS)
+    data = FMT_OF_FMT + fmt
+    at = len(data)
+    data += df_record(130, "QHffffff", 1, 256, 0, 0, 0, 0, 0, 0) + df_record(130, "QHffffff", 2, 255, 0, 0, 0, 0, 0, 0)
+    msgs, report = read_all(write(tmp_path, "a.bin", data))
+    assert [(m.time_usec, m.id) for _, m in msgs] == [(2, 255)]
+    assert report.skipped == [[at, 3 + 8 + 2 + 24, None]]
+
+
+def test_dataflash_gps_with_gpa_is_a_gps_raw_int_in_mavlink_units(tmp_path: Path) -> None:
+    """GPS Lat/Lng 1e-7 deg, Alt (e: cm) m, Spd m/s, GCrs deg, HDop (c: x100); GPA VDop/HAcc/VAcc/SAcc (C: x100)."""
+    gpa = df_record(132, GPA_FMT, 2_000_000, 0, 150, 250, 400, 30)
+    data = df_head() + df_gps(2_000_000) + gpa + df_imu(2_000_500)
+    msgs, report = read_all(write(tmp_path, "a.bin", data))
+    assert types(msgs) == ["GPS_RAW_INT", "HIGHRES_IMU"]
+    frac, g = msgs[0]
+    assert frac == len(df_head()) / len(data)
+    assert (g.time_usec, g.fix_type, g.satellites_visible) == (2_000_000, 3, 10)
+    assert (g.lat, g.lon, g.alt, g.alt_ellipsoid) == (473977418, 85455939, 488500, 0)
+    assert (g.vel, g.cog, g.eph, g.epv) == (250, 9000, 120, 150)
+    assert (g.h_acc, g.v_acc, g.vel_acc) == (2500, 4000, 300)
+    assert not report.damaged and not report.rejected
+
+
+def test_dataflash_gps_without_matching_gpa_has_no_accuracies(tmp_path: Path) -> None:
+    """A GPA of another time does not belong to the GPS: accuracies unknown (0), VDop unknown (65535)."""
+    gpa = df_record(132, GPA_FMT, 2_000_001, 0, 150, 250, 400, 30)
+    data = df_head() + df_gps(2_000_000) + gpa + df_imu(2_000_500)
+    msgs, _ = read_all(write(tmp_path, "a.bin", data))
+    g = msgs[0][1]
+    assert types(msgs) == ["GPS_RAW_INT", "HIGHRES_IMU"]
+    assert (g.h_acc, g.v_acc, g.vel_acc, g.epv, g.eph) == (0, 0, 0, 65535, 120)
+
+
+def test_dataflash_gps_goes_out_before_the_next_gps_or_at_the_end(tmp_path: Path) -> None:
+    """A GPS waiting for its GPA is sent when the next GPS or the end of the log comes."""
+    data = df_head() + df_gps(1_000_000) + df_gps(2_000_000)
+    msgs, _ = read_all(write(tmp_path, "a.bin", data))
+    assert [(m.get_type(), m.time_usec) for _, m in msgs] == [("GPS_RAW_INT", 1_000_000), ("GPS_RAW_INT", 2_000_000)]
+    assert [f for f, _ in msgs] == [len(df_head()) / len(data), (len(df_head()) + GPS_LEN) / len(data)]
+
+
+def test_dataflash_gps_of_instance_1_and_impossible_fixes(tmp_path: Path) -> None:
+    """Only GPS instance 0 is used; a latitude beyond 2^31 - 1 degE7 is counted as rejected."""
+    data = df_head() + df_gps(1, inst=1) + df_gps(2, lat=2**31 - 1) + df_imu(3) + df_gps(4, lat=-2**31)
+    data += df_gps(5, lng=2**31 - 1)
+    msgs, report = read_all(write(tmp_path, "a.bin", data))
+    assert [(m.get_type(), m.time_usec) for _, m in msgs] == [("GPS_RAW_INT", 2), ("HIGHRES_IMU", 3),
+                                                             ("GPS_RAW_INT", 4), ("GPS_RAW_INT", 5)]
+    assert [m.lat for _, m in msgs if m.get_type() == "GPS_RAW_INT"] == [2**31 - 1, -2**31, 473977418]
+    assert not report.rejected
+
+
+def test_dataflash_baro_is_a_scaled_pressure_in_hpa(tmp_path: Path) -> None:
+    """BARO Press (Pa) / 100 is press_abs; Temp (c: cdegC) is temperature; time in ms."""
+    data = df_head() + df_record(133, BARO_FMT, 3_456_789, 0, 101325.0, 2534)
+    data += df_record(133, BARO_FMT, 4_000_000, 1, 90000.0, 0) + df_record(133, BARO_FMT, 5_000_000, 0, 0.0, 0)
+    msgs, report = read_all(write(tmp_path, "a.bin", data))
+    assert types(msgs) == ["SCALED_PRESSURE"]
+    frac, b = msgs[0]
+    assert frac == len(df_head()) / len(data)
+    assert (b.time_boot_ms, b.press_abs, b.temperature) == (3456, pytest.approx(1013.25, abs=1e-4), 2534)
+    assert report.rejected == {"BARO": 1}
+    assert report.lines() == [f"{tmp_path / 'a.bin'}: left out 1 BARO record(s) whose values no MAVLink message "
+                              "can carry (out of range or not finite)"]
+
+
+def test_dataflash_mag_milligauss_rides_on_the_next_imu_records(tmp_path: Path) -> None:
+    """MAG MagX..Z (int16 mGauss) x 1e-3 is the gauss of every later HIGHRES_IMU; all zeros is no sample."""
+    data = df_head() + df_imu(1) + df_record(134, MAG_FMT, 2, 0, 200, -500, 1000) + df_imu(3) + df_imu(4)
+    data += df_record(134, MAG_FMT, 5, 1, 1, 1, 1) + df_imu(6) + df_record(134, MAG_FMT, 7, 0, 0, 0, 0) + df_imu(8)
+    msgs, _ = read_all(write(tmp_path, "a.bin", data))
+    got = [(m.time_usec, m.fields_updated, m.xmag, m.ymag, m.zmag) for _, m in msgs]
+    mag = (pytest.approx(0.2), pytest.approx(-0.5), pytest.approx(1.0))
+    assert got == [(1, ACC_GYRO, 0.0, 0.0, 0.0), (3, ACC_GYRO | MAG_BITS, *mag), (4, ACC_GYRO | MAG_BITS, *mag),
+                   (6, ACC_GYRO | MAG_BITS, *mag), (8, ACC_GYRO, 0.0, 0.0, 0.0)]
+
+
+def test_dataflash_mag_with_one_axis_non_zero_is_a_sample(tmp_path: Path) -> None:
+    """A magnetometer sample with only MagZ non-zero is still a sample."""
+    data = df_head() + df_record(134, MAG_FMT, 2, 0, 0, 0, 7) + df_imu(3)
+    msgs, _ = read_all(write(tmp_path, "a.bin", data))
+    m = msgs[0][1]
+    assert (m.fields_updated, m.zmag) == (ACC_GYRO | MAG_BITS, pytest.approx(0.007))
+
+
+def test_dataflash_aiding_fmt_needs_its_columns_and_a_time(tmp_path: Path) -> None:
+    """A BARO FMT without Press, without a time column, or with a string Press is not read."""
+    for i, (fmt, cols) in enumerate([("QBf", "TimeUS,I,Alt"), ("BBf", "X,I,Press"), ("QBN", "TimeUS,I,Press"),
+                                     ("QBff", "TimeUS,I,Press")]):
+        data = FMT_OF_FMT + df_fmt(133, "BARO", fmt, cols) + b"\xa3\x95\x85" + bytes(200)[:struct.calcsize(
+            "<" + fmt.replace("N", "16s"))]
+        msgs, report = read_all(write(tmp_path, f"{i}.bin", data))
+        assert msgs == [] and not report.damaged
+
+
+def test_dataflash_baro_with_timems(tmp_path: Path) -> None:
+    """A BARO with TimeMS is stamped TimeMS x 1000 us, i.e. time_boot_ms = TimeMS."""
+    data = FMT_OF_FMT + df_fmt(133, "BARO", "If", "TimeMS,Press") + df_record(133, "If", 4321, 95000.0)
+    msgs, _ = read_all(write(tmp_path, "a.bin", data))
+    assert [(m.time_boot_ms, m.press_abs, m.temperature) for _, m in msgs] == [(4321, 950.0, 0)]
+
+
+# -- tlog ---------------------------------------------------------------------------------------
+
+
+def rec(t_us: int, frame: bytes) -> bytes:
+    return struct.pack(">Q", t_us) + frame
+
+
+def imu_frame(mav: mavlink.MAVLink, t_us: int) -> bytes:
+    return mav.highres_imu_encode(t_us, 0.5, -1.0, -9.75, 0.25, 0.0, -0.125, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+                                  ACC_GYRO, 1).pack(mav)
+
+
+def test_tlog_records_are_decoded_with_the_fraction_read(tmp_path: Path) -> None:
+    """Each record's frame is decoded in SI units; the fraction is the end of the record over the size."""
+    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    a = rec(1, imu_frame(mav, 100))
+    b = rec(2, imu_frame(mav, 200))
+    msgs, report = read_all(write(tmp_path, "a.tlog", a + b))
+    assert [(f, m.time_usec, m.xacc, m.zgyro, m.id) for f, m in msgs] == [
+        (len(a) / len(a + b), 100, 0.5, -0.125, 1), (1.0, 200, 0.5, -0.125, 1)]
+    assert not report.damaged
+
+
+def test_tlog_mavlink1_and_signed_frames(tmp_path: Path) -> None:
+    """A MAVLink 1 frame is 8 + payload bytes; a signed MAVLink 2 frame carries 13 more."""
+    v1 = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    v1.WIRE_PROTOCOL_VERSION = "1.0"
+    f1 = bytearray(imu_frame(mavlink.MAVLink(None), 100))
+    hb = v1.heartbeat_encode(2, 12, 0, 0, 0)
+    hb_bytes = bytearray(hb.pack(v1))
+    hb_bytes[0] = 0xFE
+    signed = bytearray(f1)
+    signed[2] |= 0x01
+    data = rec(1, bytes(f1)) + rec(2, bytes(signed) + bytes(13)) + rec(3, bytes(f1))
+    msgs, report = read_all(write(tmp_path, "a.tlog", data))
+    assert types(msgs)[0] == "HIGHRES_IMU" and types(msgs)[2] == "HIGHRES_IMU"
+    assert report.skipped == [[len(rec(1, bytes(f1))), len(rec(2, bytes(signed) + bytes(13))), None]]
+
+
+def test_tlog_junk_is_bad_data_and_skipped_to_the_next_record(tmp_path: Path) -> None:
+    """Bytes before a record (8 time bytes then a marker) are one BAD_DATA; the stretch is counted."""
+    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    a = rec(1, imu_frame(mav, 100))
+    junk = b"\x00" * 20
+    b = rec(2, imu_frame(mav, 200))
+    msgs, report = read_all(write(tmp_path, "a.tlog", a + junk + b))
+    assert types(msgs) == ["HIGHRES_IMU", "BAD_DATA", "HIGHRES_IMU"]
+    assert msgs[1][0] == len(a) / len(a + junk + b)
+    assert bytes(msgs[1][1].data) == junk
+    assert report.skipped == [[len(a), 20, None]]
+
+
+def test_tlog_bad_crc_skips_the_whole_record(tmp_path: Path) -> None:
+    """A frame failing its CRC is BAD_DATA and its record (time + frame) is skipped."""
+    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    a = bytearray(rec(1, imu_frame(mav, 100)))
+    a[-1] ^= 0xFF
+    b = rec(2, imu_frame(mav, 200))
+    msgs, report = read_all(write(tmp_path, "a.tlog", bytes(a) + b))
+    assert types(msgs) == ["BAD_DATA", "HIGHRES_IMU"]
+    assert report.skipped == [[0, len(a), None]]
+
+
+def test_tlog_cut_record_and_short_tail(tmp_path: Path) -> None:
+    """A record cut by the end, or a tail shorter than 16 bytes, is a cut at its first byte."""
+    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    a = rec(1, imu_frame(mav, 100))
+    b = rec(2, imu_frame(mav, 200))
+    for i, tail in enumerate([b[:-1], b[:15], b[:16]]):
+        msgs, report = read_all(write(tmp_path, f"{i}.tlog", a + tail))
+        assert types(msgs) == ["HIGHRES_IMU"] and report.cut_at == len(a) and report.skipped == []
+
+
+def test_tlog_junk_at_the_end_without_a_marker(tmp_path: Path) -> None:
+    """Junk of 16 bytes or more with no marker after it is skipped to the end of the file."""
+    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    a = rec(1, imu_frame(mav, 100))
+    msgs, report = read_all(write(tmp_path, "a.tlog", a + b"\x01" * 16))
+    assert types(msgs) == ["HIGHRES_IMU", "BAD_DATA"]
+    assert report.skipped == [[len(a), 16, None]] and report.cut_at is None
+
+
+def test_next_record_finds_the_nearer_marker_eight_bytes_back() -> None:
+    """The next record starts 8 bytes before the nearer of FD/FE; with none, the end (or 8 short of it)."""
+    buf = bytes(12) + b"\xfe" + bytes(5) + b"\xfd" + bytes(30)
+    assert replay._next_record(buf, 1) == 4
+    assert replay._next_record(buf, 5) == 10
+    assert replay._next_record(bytes(40), 1) == 40
+    assert replay._next_record(bytes(40), 1, eof=False) == 32
+    assert replay._next_record(bytes(40), 35, eof=False) == 35
+    assert replay._next_record(bytes(8) + b"\xfd", 0) == 0
+
+
+def test_tlog_longer_than_the_read_chunk_is_read_whole(tmp_path: Path) -> None:
+    """Records straddling the 1 MiB read boundary are read in order, none lost."""
+    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    recs = [rec(i, imu_frame(mav, i)) for i in range(256)]
+    one = b"".join(recs)
+    n = (1 << 20) // len(one) + 1
+    msgs, report = read_all(write(tmp_path, "a.tlog", one * n))
+    assert len(msgs) == 256 * n and not report.damaged
+    assert [m.time_usec for _, m in msgs[:3]] == [0, 1, 2] and msgs[-1][1].time_usec == 255
+
+
+# -- ULog ---------------------------------------------------------------------------------------
+
+ULOG_TYPES = {"uint64_t": "Q", "int32_t": "i", "uint8_t": "B", "float": "f", "double": "d", "uint16_t": "H"}
+
+
+def ulog_msg(kind: bytes, payload: bytes) -> bytes:
+    return struct.pack("<HB", len(payload), kind[0]) + payload
+
+
+def ulog(topics: list[tuple[str, list[tuple[str, str]], list[tuple]]], multi: dict[str, int] | None = None) -> bytes:
+    """A ULog (file format version 1): header, flag bits, one F and A per topic, then D rows by time."""
+    out = bytearray(b"ULog\x01\x12\x35\x01" + struct.pack("<Q", 0))
+    out += ulog_msg(b"B", bytes(40))
+    for name, fields, _ in topics:
+        text = name + ":" + "".join(f"{t} {f};" for t, f in fields)
+        out += ulog_msg(b"F", text.encode())
+    rows = []
+    for msg_id, (name, fields, data) in enumerate(topics):
+        out += ulog_msg(b"A", struct.pack("<BH", (multi or {}).get(name, 0), msg_id) + name.encode())
+        code = "<" + "".join(f"{n}{ULOG_TYPES[t.split('[')[0]]}" if "[" in t else ULOG_TYPES[t]
+                             for t, _ in fields for n in ([int(t.split("[")[1][:-1])] if "[" in t else [""]))
+        for row in data:
+            rows.append((row[0], msg_id, struct.pack("<H", msg_id) + struct.pack(code, *row)))
+    for _, _, payload in sorted(rows, key=lambda r: (r[0], r[1])):
+        out += ulog_msg(b"D", payload)
+    return bytes(out)
+
+
+SC = ("sensor_combined", [("uint64_t", "timestamp"), ("float[3]", "gyro_rad"), ("float[3]", "accelerometer_m_s2")])
+
+
+def sc_rows(times: list[int]) -> list[tuple]:
+    return [(t, 0.5, -0.25, 0.125, 1.5, -2.0, -9.75) for t in times]
+
+
+def test_ulog_sensor_combined_is_highres_imu_on_its_timestamps(tmp_path: Path) -> None:
+    """sensor_combined gyro_rad (rad/s) and accelerometer_m_s2 go out unchanged; timestamp (us) is time_usec."""
+    data = ulog([(*SC, sc_rows([1000, 2000, 3000, 4000]))])
+    msgs, report = read_all(write(tmp_path, "a.ulg", data))
+    assert [(f, m.time_usec, m.id) for f, m in msgs] == [(0.25, 1000, 0), (0.5, 2000, 0), (0.75, 3000, 0),
+                                                         (1.0, 4000, 0)]
+    m = msgs[0][1]
+    assert (m.xgyro, m.ygyro, m.zgyro, m.xacc, m.yacc, m.zacc) == (0.5, -0.25, 0.125, 1.5, -2.0, -9.75)
+    assert m.fields_updated == ACC_GYRO and not report.damaged
+
+
+GPS_OLD = ("vehicle_gps_position", [("uint64_t", "timestamp"), ("int32_t", "lat"), ("int32_t", "lon"),
+                                    ("int32_t", "alt"), ("int32_t", "alt_ellipsoid"), ("float", "s_variance_m_s"),
+                                    ("float", "eph"), ("float", "epv"), ("float", "hdop"), ("float", "vdop"),
+                                    ("float", "vel_m_s"), ("float", "cog_rad"), ("uint8_t", "fix_type"),
+                                    ("uint8_t", "satellites_used")])
+
+
+def test_ulog_vehicle_gps_position_up_to_v1_13(tmp_path: Path) -> None:
+    """lat/lon int32 1e-7 deg, alt/alt_ellipsoid int32 mm, eph/epv m, vel_m_s, cog_rad, published before the IMU."""
+    gps = [(2000, 473977418, 85455939, 488500, 536250, 0.25, 1.5, 2.5, 0.75, 1.25, 3.0, math.pi / 2, 3, 12)]
+    data = ulog([(*SC, sc_rows([1000, 2000, 3000])), (*GPS_OLD, gps)])
+    msgs, _ = read_all(write(tmp_path, "a.ulg", data))
+    assert [(f, m.get_type(), m.time_usec) for f, m in msgs] == [
+        (pytest.approx(1 / 3), "HIGHRES_IMU", 1000), (pytest.approx(1 / 3), "GPS_RAW_INT", 2000),
+        (pytest.approx(2 / 3), "HIGHRES_IMU", 2000), (1.0, "HIGHRES_IMU", 3000)]
+    g = msgs[1][1]
+    assert (g.lat, g.lon, g.alt, g.alt_ellipsoid, g.fix_type, g.satellites_visible) == (
+        473977418, 85455939, 488500, 536250, 3, 12)
+    assert (g.h_acc, g.v_acc, g.vel_acc, g.eph, g.epv, g.vel, g.cog) == (1500, 2500, 250, 75, 125, 300, 9000)
+
+
+def test_ulog_sensor_gps_from_v1_14_in_degrees_and_metres(tmp_path: Path) -> None:
+    """latitude_deg/longitude_deg float64 deg, altitude_msl_m/altitude_ellipsoid_m float64 m."""
+    fields = [("uint64_t", "timestamp"), ("double", "latitude_deg"), ("double", "longitude_deg"),
+              ("double", "altitude_msl_m"), ("double", "altitude_ellipsoid_m"), ("uint8_t", "fix_type")]
+    data = ulog([(*SC, sc_rows([1000, 2000])), ("sensor_gps", fields, [(1500, 47.25, -8.5, 488.5, 536.25, 4)])])
+    msgs, _ = read_all(write(tmp_path, "a.ulg", data))
+    g = [m for _, m in msgs if m.get_type() == "GPS_RAW_INT"][0]
+    assert (g.time_usec, g.lat, g.lon, g.alt, g.alt_ellipsoid, g.fix_type) == (
+        1500, 472500000, -85000000, 488500, 536250, 4)
+    assert (g.h_acc, g.eph, g.vel, g.cog, g.satellites_visible) == (0, 65535, 65535, 65535, 255)
+
+
+def test_ulog_gps_that_no_field_can_hold_is_counted(tmp_path: Path) -> None:
+    """A NaN latitude is left out and counted under the topic's name."""
+    fields = [("uint64_t", "timestamp"), ("double", "latitude_deg"), ("double", "longitude_deg"),
+              ("double", "altitude_msl_m"), ("uint8_t", "fix_type")]
+    data = ulog([(*SC, sc_rows([1000])), ("sensor_gps", fields, [(500, math.nan, 8.5, 400.0, 3)])])
+    msgs, report = read_all(write(tmp_path, "a.ulg", data))
+    assert types(msgs) == ["HIGHRES_IMU"] and report.rejected == {"sensor_gps": 1}
+
+
+BARO = ("sensor_baro", [("uint64_t", "timestamp"), ("float", "pressure"), ("float", "temperature")])
+
+
+def test_ulog_sensor_baro_hpa_below_2000_and_pa_from_2000(tmp_path: Path) -> None:
+    """sensor_baro pressure under 2000 is hPa (up to v1.12), from 2000 up it is Pa (v1.13)."""
+    rows = [(100, 1013.25, 21.5), (200, 1999.0, 0.0), (300, 2000.0, 0.0), (400, 101325.0, -5.25)]
+    data = ulog([(*SC, sc_rows([1000])), (*BARO, rows)])
+    msgs, _ = read_all(write(tmp_path, "a.ulg", data))
+    got = [(m.time_boot_ms, m.press_abs, m.temperature) for _, m in msgs if m.get_type() == "SCALED_PRESSURE"]
+    assert got == [(0, 1013.25, 2150), (0, 1999.0, 0), (0, 20.0, 0), (0, 1013.25, -525)]
+
+
+def test_ulog_vehicle_air_data_uses_its_sample_time(tmp_path: Path) -> None:
+    """vehicle_air_data baro_pressure_pa (Pa) and baro_temp_celcius, stamped timestamp_sample (us)."""
+    fields = [("uint64_t", "timestamp"), ("uint64_t", "timestamp_sample"), ("float", "baro_pressure_pa"),
+              ("float", "baro_temp_celcius")]
+    data = ulog([(*SC, sc_rows([9000])), ("vehicle_air_data", fields, [(8000, 6999, 95000.0, 12.5)])])
+    msgs, _ = read_all(write(tmp_path, "a.ulg", data))
+    assert [(m.get_type(), getattr(m, "time_boot_ms", None)) for _, m in msgs][0] == ("SCALED_PRESSURE", 6)
+    b = msgs[0][1]
+    assert (b.press_abs, b.temperature) == (950.0, 1250)
+
+
+MAG = ("vehicle_magnetometer", [("uint64_t", "timestamp"), ("float[3]", "magnetometer_ga")])
+
+
+def test_ulog_magnetometer_rides_on_imu_samples_from_its_time(tmp_path: Path) -> None:
+    """vehicle_magnetometer (gauss) is on every IMU sample at or after its timestamp; NaN ends it, counted."""
+    rows = [(2000, 0.25, -0.5, 0.125), (4000, math.nan, 0.0, 0.0)]
+    data = ulog([(*SC, sc_rows([1000, 2000, 3000, 4000, 5000])), (*MAG, rows)])
+    msgs, report = read_all(write(tmp_path, "a.ulg", data))
+    got = [(m.time_usec, m.fields_updated, m.xmag, m.ymag, m.zmag) for _, m in msgs]
+    assert got == [(1000, ACC_GYRO, 0.0, 0.0, 0.0), (2000, ACC_GYRO | MAG_BITS, 0.25, -0.5, 0.125),
+                   (3000, ACC_GYRO | MAG_BITS, 0.25, -0.5, 0.125), (4000, ACC_GYRO, 0.0, 0.0, 0.0),
+                   (5000, ACC_GYRO, 0.0, 0.0, 0.0)]
+    assert report.rejected == {"vehicle_magnetometer": 1}
+
+
+def test_ulog_sensor_mag_xyz(tmp_path: Path) -> None:
+    """sensor_mag x/y/z (gauss) when there is no vehicle_magnetometer; instance 1 is not used."""
+    fields = [("uint64_t", "timestamp"), ("float", "x"), ("float", "y"), ("float", "z")]
+    data = ulog([(*SC, sc_rows([1000, 2000])), ("sensor_mag", fields, [(1500, 0.5, 0.25, -0.75)]),
+                 ("vehicle_magnetometer", MAG[1], [(1500, 0.125, 0.125, 0.125)])], multi={"vehicle_magnetometer": 1})
+    msgs, _ = read_all(write(tmp_path, "a.ulg", data))
+    assert [(m.xmag, m.ymag, m.zmag) for _, m in msgs] == [(0.0, 0.0, 0.0), (0.5, 0.25, -0.75)]
+
+
+def test_ulog_without_sensor_combined_is_refused(tmp_path: Path) -> None:
+    """A ULog with no sensor_combined rows is a DataFileError naming the topic."""
+    data = ulog([(*BARO, [(100, 1013.25, 21.5)])])
+    with pytest.raises(DataFileError, match="sensor_combined"):
+        read_all(write(tmp_path, "a.ulg", data))
+
+
+# -- the report -----------------------------------------------------------------------------------
+
+
+def test_report_merges_adjacent_stretches_and_ignores_empty_ones() -> None:
+    """A stretch starting where the last ended extends it; a zero or negative length is no stretch."""
+    r = LogReport(Path("x.bin"), 1000)
+    r.skip(10, 0)
+    r.skip(10, -1)
+    assert r.skipped == [] and not r.damaged
+    r.skip(10, 5)
+    r.skip(15, 1)
+    r.skip(17, 2)
+    assert r.skipped == [[10, 6, None], [17, 2, None]] and r.skipped_bytes == 8 and r.damaged
+
+
+def test_report_lines_name_places_times_and_the_cut() -> None:
+    """The warning counts bytes and places, shows the first three with their sensor time, and the cut."""
+    r = LogReport(Path("x.bin"), 1000)
+    assert r.lines() == []
+    r.skipped = [[10, 5, None]]
+    assert r.lines() == ["x.bin: skipped 5 unreadable bytes (0.5 % of the file) in 1 place: byte 10 (5 bytes, "
+                         "before the first IMU sample)"]
+    r.skipped = [[10, 5, None], [20, 5, 1.5], [30, 5, 2.0], [40, 5, 3.25]]
+    r.cut_at = 900
+    r.notes.append("a note")
+    assert r.lines() == [
+        "x.bin: skipped 20 unreadable bytes (2 % of the file) in 4 places: byte 10 (5 bytes, before the first IMU "
+        "sample), byte 20 (5 bytes, after sensor time 1.500 s), byte 30 (5 bytes, after sensor time 2.000 s) and 1 "
+        "more",
+        "x.bin: the log ends early: its last record, from byte 900 to the end (100 bytes), is incomplete (a cut or "
+        "unfinished file)",
+        "x.bin: a note"]
+    four = r.skipped
+    r.skipped = four[:2]
+    assert " in 2 places: " in r.lines()[0]
+    r.skipped = four[:3]
+    assert r.lines()[0].endswith("after sensor time 2.000 s)")
+
+
+def test_report_counts_are_ordered_by_count_then_name() -> None:
+    """Rejected kinds are listed most first, ties by name, five shown and the rest counted."""
+    c = {"b": 1, "a": 1, "c": 3, "d": 2, "e": 1, "f": 1, "g": 5}
+    assert replay._counts(c) == "5 g, 3 c, 2 d, 1 a, 1 b and 2 more types"
+    assert replay._counts({"a": 1}, shown=1) == "1 a"
+
+
+# -- opening -------------------------------------------------------------------------------------
+
+
+def test_open_log_refuses_missing_empty_unknown_and_mislabelled_files(tmp_path: Path) -> None:
+    """Missing, empty, unknown suffix and a .bin that does not start with A3 95 are refused at once."""
+    with pytest.raises(DataFileError, match="no such file"):
+        open_log(tmp_path / "none.bin")
+    with pytest.raises(DataFileError, match="unknown log type '.csv'"):
+        open_log(write(tmp_path, "a.csv", b"x"))
+    with pytest.raises(DataFileError, match="the file is empty"):
+        open_log(write(tmp_path, "a.bin", b""))
+    with pytest.raises(DataFileError, match="starting with bytes a3 95, found bytes 00 01 02 03 04 05 06 07$"):
+        open_log(write(tmp_path, "b.bin", bytes(range(20))))
+    with pytest.raises(DataFileError, match=r"found an ArduPilot DataFlash log \(rename it to .bin\)$"):
+        open_log(write(tmp_path, "c.ulg", df_head()))
+    msgs, _ = read_all(write(tmp_path, "D.BIN", df_head() + df_imu(1)))
+    assert types(msgs) == ["HIGHRES_IMU"]
+
+
+# -- field ranges of the MAVLink messages ----------------------------------------------------------
+
+
+def codec() -> tuple[mavlink.MAVLink, mavlink.MAVLink]:
+    return mavlink.MAVLink(None, srcSystem=1, srcComponent=1), replay._decoder()
+
+
+def fix(**kw: float) -> mavlink.MAVLink_message:
+    enc, dec = codec()
+    args = dict(t_us=0, fix_type=0, lat_deg=0.0, lon_deg=0.0, alt_msl_m=0.0, alt_ellipsoid_m=None, h_acc_m=0.0,
+                v_acc_m=0.0, vel_m_s=0.0, cog_deg=0.0, vel_acc_m_s=0.0, hdop=0.0, vdop=0.0, satellites=0)
+    args.update(kw)
+    return replay.gps_raw_int(enc, dec, **args)
+
+
+def test_gps_raw_int_zero_fix_is_all_zero() -> None:
+    """Zeros in every field stay zeros (0 is inside every field's range)."""
+    g = fix()
+    assert (g.time_usec, g.fix_type, g.lat, g.lon, g.alt, g.eph, g.epv, g.vel, g.cog, g.satellites_visible,
+            g.alt_ellipsoid, g.h_acc, g.v_acc, g.vel_acc) == (0,) * 14
+
+
+def test_gps_raw_int_field_ranges_at_their_ends() -> None:
+    """Each integer field takes its type's extremes; one step beyond is an error or the field's 'unknown'."""
+    top = fix(t_us=2**53, fix_type=255, lat_deg=(2**31 - 1) / 1e7, lon_deg=(2**31 - 1) / 1e7,
+              alt_msl_m=(2**31 - 1) / 1e3, alt_ellipsoid_m=(2**31 - 1) / 1e3, h_acc_m=(2**32 - 1) / 1e3,
+              v_acc_m=(2**32 - 1) / 1e3, vel_acc_m_s=(2**32 - 1) / 1e3, vel_m_s=655.34, cog_deg=359.99,
+              hdop=655.35, vdop=655.35, satellites=255)
+    assert (top.time_usec, top.fix_type, top.lat, top.lon, top.alt, top.alt_ellipsoid) == (
+        2**53, 255, 2**31 - 1, 2**31 - 1, 2**31 - 1, 2**31 - 1)
+    assert (top.h_acc, top.v_acc, top.vel_acc, top.vel, top.cog, top.eph, top.epv, top.satellites_visible) == (
+        2**32 - 1, 2**32 - 1, 2**32 - 1, 65534, 35999, 65535, 65535, 255)
+    low = fix(lat_deg=-2**31 / 1e7, lon_deg=-2**31 / 1e7, alt_msl_m=-2**31 / 1e3, alt_ellipsoid_m=-2**31 / 1e3)
+    assert (low.lat, low.lon, low.alt, low.alt_ellipsoid) == (-2**31, -2**31, -2**31, -2**31)
+    assert fix(vel_m_s=655.36).vel == 65535
+    beyond = fix(alt_ellipsoid_m=2**31 / 1e3, h_acc_m=2**32 / 1e3, v_acc_m=2**32 / 1e3, vel_acc_m_s=2**32 / 1e3,
+                 vel_m_s=655.35, cog_deg=359.996, hdop=655.36, vdop=-0.01, satellites=256)
+    assert (beyond.alt_ellipsoid, beyond.h_acc, beyond.v_acc, beyond.vel_acc, beyond.vel, beyond.cog, beyond.eph,
+            beyond.epv, beyond.satellites_visible) == (0, 0, 0, 0, 65535, 65535, 65535, 65535, 255)
+    assert fix(alt_msl_m=-1.0).alt == -1000
+    assert (fix(alt_ellipsoid_m=-2**31 / 1e3 - 0.001).alt_ellipsoid, fix(satellites=-1).satellites_visible) == (0, 255)
+    assert (fix(cog_deg=-90.0).cog, fix(cog_deg=360.0).cog, fix(vel_acc_m_s=2.0).vel_acc) == (27000, 0, 2000)
+    for kw in [dict(t_us=-1), dict(t_us=2**64), dict(fix_type=256), dict(fix_type=-1), dict(lat_deg=2**31 / 1e7),
+               dict(lat_deg=(-2**31 - 1) / 1e7), dict(lon_deg=2**31 / 1e7), dict(lon_deg=(-2**31 - 1) / 1e7),
+               dict(alt_msl_m=2**31 / 1e3), dict(alt_msl_m=(-2**31 - 1) / 1e3), dict(lat_deg=math.nan)]:
+        with pytest.raises(replay.PACK_ERRORS):
+            fix(**kw)
+
+
+def test_scaled_pressure_ranges_at_their_ends() -> None:
+    """Any positive pressure is sent; temperature cdegC fits int16 or is 0; time_boot_ms fits uint32."""
+    enc, dec = codec()
+    b = replay.scaled_pressure(enc, dec, (2**32 - 1) * 1000 + 999, 0.5, -327.68)
+    assert (b.time_boot_ms, b.press_abs, b.press_diff, b.temperature) == (2**32 - 1, pytest.approx(0.005), 0.0, -32768)
+    assert replay.scaled_pressure(enc, dec, 0, 1.0, 327.67).temperature == 32767
+    assert replay.scaled_pressure(enc, dec, 0, 1.0, 327.68).temperature == 0
+    assert replay.scaled_pressure(enc, dec, 0, 1.0, -327.69).temperature == 0
+    for t_us, p in [(2**32 * 1000, 1.0), (0, 0.0), (0, -1.0), (0, math.inf), (0, math.nan)]:
+        with pytest.raises(ValueError):
+            replay.scaled_pressure(enc, dec, t_us, p, 0.0)
+
+
+def test_dataflash_messages_come_from_the_autopilot_with_nothing_else_set(tmp_path: Path) -> None:
+    """Made-up messages are from system 1, component 1 (MAV_COMP_ID_AUTOPILOT1); pressure fields stay 0."""
+    data = df_head() + df_gps(1) + df_imu(2)
+    msgs, _ = read_all(write(tmp_path, "a.bin", data))
+    assert [(m.get_srcSystem(), m.get_srcComponent()) for _, m in msgs] == [(1, 1), (1, 1)]
+    m = msgs[1][1]
+    assert (m.abs_pressure, m.diff_pressure, m.pressure_alt, m.temperature) == (0.0, 0.0, 0.0, 0.0)
+
+
+def test_dataflash_rejected_records_are_counted_one_by_one(tmp_path: Path) -> None:
+    """Each GPS with an altitude beyond int32 mm (Alt in cm) and each BARO with no pressure counts once."""
+    bad_baro = df_record(133, BARO_FMT, 1, 0, 0.0, 0)
+    data = df_head() + df_gps(1, alt_cm=2**31 - 1) + df_gps(2, alt_cm=-2**31) + bad_baro + bad_baro + df_imu(3)
+    msgs, report = read_all(write(tmp_path, "a.bin", data))
+    assert types(msgs) == ["HIGHRES_IMU"] and report.rejected == {"GPS": 2, "BARO": 2}
+
+
+def test_dataflash_three_byte_tail_of_an_unknown_type_is_skipped(tmp_path: Path) -> None:
+    """A last A3 95 with an unknown type is three skipped bytes; of a known type it is a cut."""
+    head = df_head() + df_imu(1)
+    _, report = read_all(write(tmp_path, "a.bin", head + b"\xa3\x95\x00"))
+    assert report.skipped == [[len(head), 3, None]] and report.cut_at is None
+    _, report = read_all(write(tmp_path, "b.bin", head + b"\xa3\x95\x82"))
+    assert report.skipped == [] and report.cut_at == len(head)
+
+
+@pytest.mark.parametrize("tail", [b"\xa3", b"\xa3\x95\x82\x00"])
+def test_dataflash_gps_waiting_for_its_gpa_is_sent_when_the_log_is_cut(tmp_path: Path, tail: bytes) -> None:
+    """A cut after a GPS record still sends the GPS."""
+    msgs, report = read_all(write(tmp_path, "a.bin", df_head() + df_gps(1) + tail))
+    assert types(msgs) == ["GPS_RAW_INT"] and report.cut_at == len(df_head()) + GPS_LEN
+
+
+def test_dataflash_one_junk_byte_before_a_record(tmp_path: Path) -> None:
+    """A single junk byte is skipped and the record right after it is read."""
+    head = df_head()
+    msgs, report = read_all(write(tmp_path, "a.bin", head + b"\x00" + df_imu(1)))
+    assert [m.time_usec for _, m in msgs] == [1] and report.skipped == [[len(head), 1, None]]
+
+
+def test_dataflash_fmt_with_non_ascii_name_is_read_past(tmp_path: Path) -> None:
+    """An FMT whose name, format or columns are not ASCII is a record of no use; reading goes on."""
+    odd = df_record(128, "BB4s16s64s", 140, 4, b"\xff\xfe", b"B\xff", b"\xfeX")
+    msgs, report = read_all(write(tmp_path, "a.bin", FMT_OF_FMT + odd + df_head()[FMT_LEN:] + df_imu(1)))
+    assert [m.time_usec for _, m in msgs] == [1] and not report.damaged
+
+
+def test_dataflash_imu_with_signed_time_and_double_or_half_floats(tmp_path: Path) -> None:
+    """TimeUS of format q and an instance of format b are integers; gyro d and accel g (half) are floats."""
+    fmt = "qbdddggg"
+    data = FMT_OF_FMT + df_fmt(130, "IMU", fmt, IMU_COLS) + df_record(130, fmt, 77, 3, 0.5, 0.25, -0.5, 1.5, 2.0, -9.75)
+    msgs, _ = read_all(write(tmp_path, "a.bin", data))
+    m = msgs[0][1]
+    assert (m.time_usec, m.id, m.xgyro, m.zgyro, m.xacc, m.zacc) == (77, 3, 0.5, -0.5, 1.5, -9.75)
+
+
+@pytest.mark.parametrize("fmt, cols", [("QBfy", "TimeUS,I,Press,X"), ("QBa", "TimeUS,I,Press"),
+                                       ("NBf", "TimeUS,I,Press"), ("QNf", "TimeUS,I,Press")])
+def test_dataflash_baro_fmt_with_text_or_unknown_columns_is_not_read(tmp_path: Path, fmt: str, cols: str) -> None:
+    """A BARO whose time, instance or pressure is text, or with an unknown format character, is not read."""
+    size = 3 + struct.calcsize(df_struct(fmt.replace("y", "B").replace("a", "64s")))
+    data = FMT_OF_FMT + df_fmt(133, "BARO", fmt, cols, length=size) + b"\xa3\x95\x85" + bytes(size - 3)
+    msgs, report = read_all(write(tmp_path, "a.bin", data))
+    assert msgs == [] and not report.damaged
+
+
+def test_dataflash_gps_fmt_redefined_without_lat_stops_gps(tmp_path: Path) -> None:
+    """A later GPS FMT of the same type without Lat is not read as GPS."""
+    again = df_fmt(131, "GPS", GPS_FMT, GPS_COLS.replace("Lat", "Lxx"))
+    msgs, _ = read_all(write(tmp_path, "a.bin", df_head() + df_gps(1) + again + df_gps(2)))
+    assert [m.time_usec for _, m in msgs] == [1]
+
+
+def v1_heartbeat() -> bytes:
+    """A MAVLink 1 HEARTBEAT (FE, len 9, seq, sys, comp, id 0, payload, X.25 CRC with crc_extra 50)."""
+    body = bytes([9, 0, 1, 1, 0]) + struct.pack("<IBBBBB", 0, 2, 12, 0, 4, 3)
+    crc = mavlink.x25crc(body)
+    crc.accumulate(bytes([50]))
+    return b"\xfe" + body + struct.pack("<H", crc.crc)
+
+
+def test_tlog_mavlink1_frame_is_eight_bytes_plus_payload(tmp_path: Path) -> None:
+    """A MAVLink 1 record between two MAVLink 2 records is decoded, none skipped."""
+    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    data = rec(1, imu_frame(mav, 100)) + rec(2, v1_heartbeat()) + rec(3, imu_frame(mav, 200))
+    msgs, report = read_all(write(tmp_path, "a.tlog", data))
+    assert types(msgs) == ["HIGHRES_IMU", "HEARTBEAT", "HIGHRES_IMU"] and not report.damaged
+
+
+def test_tlog_shorter_than_one_record_is_a_cut_at_byte_0(tmp_path: Path) -> None:
+    """A tlog of 5 bytes holds no record: it ends inside one at byte 0."""
+    msgs, report = read_all(write(tmp_path, "a.tlog", b"\x00\x00\x00\x00\x01"))
+    assert msgs == [] and report.cut_at == 0
+
+
+def test_tlog_damage_beyond_the_first_read_chunk_is_located_in_the_file(tmp_path: Path) -> None:
+    """Junk and a cut after the first 1 MiB are reported at their byte offsets in the file."""
+    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    one = b"".join(rec(i, imu_frame(mav, i)) for i in range(256))
+    body = one * ((1 << 20) // len(one) + 1)
+    tail = rec(9, imu_frame(mav, 9))
+    data = body + b"\x00" * 20 + tail + tail[:10]
+    msgs, report = read_all(write(tmp_path, "a.tlog", data))
+    assert report.skipped == [[len(body), 20, None]]
+    assert report.cut_at == len(body) + 20 + len(tail)
+    _, report = read_all(write(tmp_path, "b.tlog", body + tail[:-1]))
+    assert report.cut_at == len(body) and report.skipped == []
+
+
+def test_ulog_old_gps_without_ellipsoid_height_and_counted_rejects(tmp_path: Path) -> None:
+    """A vehicle_gps_position without alt_ellipsoid sends 0 (not given); two NaN fixes count 2."""
+    fields = [("uint64_t", "timestamp"), ("int32_t", "lat"), ("int32_t", "lon"), ("int32_t", "alt"),
+              ("uint8_t", "fix_type")]
+    rows = [(100, 473977418, 85455939, 488500, 3)]
+    data = ulog([(*SC, sc_rows([1000])), ("vehicle_gps_position", fields, rows)])
+    msgs, _ = read_all(write(tmp_path, "a.ulg", data))
+    g = msgs[0][1]
+    assert (g.get_type(), g.alt, g.alt_ellipsoid, g.fix_type) == ("GPS_RAW_INT", 488500, 0, 3)
+    assert (g.get_srcSystem(), g.get_srcComponent()) == (1, 1)
+    new = [("uint64_t", "timestamp"), ("double", "latitude_deg"), ("double", "longitude_deg"),
+           ("double", "altitude_msl_m"), ("uint8_t", "fix_type")]
+    data = ulog([(*SC, sc_rows([1000])), ("sensor_gps", new, [(1, math.nan, 0.0, 0.0, 3), (2, 0.0, math.nan, 0.0, 3)]),
+                 (*BARO, [(3, -1.0, 0.0), (4, math.nan, 0.0)]), (*MAG, [(5, math.nan, 0.0, 0.0)])])
+    msgs, report = read_all(write(tmp_path, "b.ulg", data))
+    assert types(msgs) == ["HIGHRES_IMU"]
+    assert report.rejected == {"sensor_gps": 2, "sensor_baro": 2, "vehicle_magnetometer": 1}
+
+
+def test_ulog_gps_topic_without_rows_or_fix_type_is_passed_over(tmp_path: Path) -> None:
+    """vehicle_gps_position with no rows, or without fix_type, gives way to sensor_gps."""
+    new = [("uint64_t", "timestamp"), ("double", "latitude_deg"), ("double", "longitude_deg"),
+           ("double", "altitude_msl_m"), ("uint8_t", "fix_type")]
+    for i, old in enumerate([(GPS_OLD[0], GPS_OLD[1], []),
+                             ("vehicle_gps_position", [f for f in GPS_OLD[1] if f[1] != "fix_type"],
+                              [(50, 1, 1, 1, 1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 9)])]):
+        data = ulog([(*SC, sc_rows([1000])), old, ("sensor_gps", new, [(100, 1.5, 2.5, 3.5, 3)])])
+        msgs, _ = read_all(write(tmp_path, f"{i}.ulg", data))
+        assert [(m.get_type(), getattr(m, "lat", None)) for _, m in msgs] == [("GPS_RAW_INT", 15000000),
+                                                                              ("HIGHRES_IMU", None)]
+
+
+def test_ulog_dropouts_are_noted_with_their_total_time(tmp_path: Path) -> None:
+    """Two logger dropout messages ('O', duration ms) are one note with their count and sum."""
+    data = ulog([(*SC, sc_rows([1000]))]) + ulog_msg(b"O", struct.pack("<H", 15)) + ulog_msg(b"O", struct.pack("<H", 10))
+    _, report = read_all(write(tmp_path, "a.ulg", data))
+    assert report.notes == ["note: the PX4 logger itself lost data 2 times (25 ms in all)"]
+
+
+def test_ulog_cut_inside_a_header_or_before_a_payload(tmp_path: Path) -> None:
+    """One byte of a message header, or a whole header without its payload, is a cut at that header."""
+    full = ulog([(*SC, sc_rows([1000, 2000]))])
+    _, report = read_all(write(tmp_path, "a.ulg", full))
+    assert report.cut_at is None and not report.damaged
+    _, report = read_all(write(tmp_path, "b.ulg", full + b"\x05"))
+    assert report.cut_at == len(full)
+    last = 3 + 2 + 8 + 24
+    _, report = read_all(write(tmp_path, "c.ulg", full[:-last + 3]))
+    assert report.cut_at == len(full) - last
+
+
+def test_ulog_sensor_combined_lacking_fields_is_refused_by_name(tmp_path: Path) -> None:
+    """sensor_combined without gyro_rad names the three missing fields."""
+    data = ulog([("sensor_combined", [("uint64_t", "timestamp"), ("float[3]", "accelerometer_m_s2")],
+                  [(1000, 0.0, 0.0, -9.75)])])
+    with pytest.raises(DataFileError, match=r"lacks the field\(s\) gyro_rad\[0\], gyro_rad\[1\], gyro_rad\[2\]$"):
+        read_all(write(tmp_path, "a.ulg", data))
+
+
+def test_report_of_a_one_byte_file_is_100_percent() -> None:
+    """One skipped byte of a one-byte file is 100 % of it."""
+    r = LogReport(Path("x.tlog"), 1)
+    r.skip(0, 1)
+    assert "(1e+02 % of the file) in 1 place:" in r.lines()[0]
+
+
+def test_made_up_frames_count_their_sequence_modulo_256(tmp_path: Path) -> None:
+    """Each made-up frame takes the next MAVLink sequence number, 255 wrapping to 0."""
+    data = df_head() + b"".join(df_imu(i) for i in range(258))
+    msgs, _ = read_all(write(tmp_path, "a.bin", data))
+    assert [m.get_seq() for _, m in msgs] == [i % 256 for i in range(258)]
+
+
+def test_dataflash_gps_with_only_the_needed_columns(tmp_path: Path) -> None:
+    """A GPS of TimeUS, Status, Lat, Lng, Alt only: speed, course and HDOP unknown, satellites 255."""
+    fmt, cols = "QBLLe", "TimeUS,Status,Lat,Lng,Alt"
+    data = FMT_OF_FMT + df_fmt(131, "GPS", fmt, cols) + df_record(131, fmt, 10, 3, 1, 2, 300)
+    msgs, report = read_all(write(tmp_path, "a.bin", data))
+    g = msgs[0][1]
+    assert (g.lat, g.lon, g.alt, g.vel, g.cog, g.eph, g.satellites_visible) == (1, 2, 3000, 65535, 65535, 65535, 255)
+    assert not report.rejected
+
+
+def test_next_record_looks_for_markers_from_eight_bytes_on() -> None:
+    """A marker before ``start + 8`` cannot start a record from ``start``."""
+    assert replay._next_record(b"\xfd" + bytes(39), 1) == 40
+    assert replay._next_record(b"\xfe" + bytes(39), 1) == 40
+
+
+def test_ulog_magnetometer_without_its_fields_and_repeated_nan(tmp_path: Path) -> None:
+    """A vehicle_magnetometer without magnetometer_ga is not used; each NaN sample counts once."""
+    data = ulog([(*SC, sc_rows([1000])), ("vehicle_magnetometer", [("uint64_t", "timestamp"), ("float", "x")],
+                                          [(500, 0.5)])])
+    msgs, _ = read_all(write(tmp_path, "a.ulg", data))
+    assert [m.fields_updated for _, m in msgs] == [ACC_GYRO]
+    data = ulog([(*SC, sc_rows([1000, 2000])), (*MAG, [(500, math.nan, 0.0, 0.0), (1500, 0.0, math.nan, 0.0)])])
+    _, report = read_all(write(tmp_path, "b.ulg", data))
+    assert report.rejected == {"vehicle_magnetometer": 2}
