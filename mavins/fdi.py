@@ -48,8 +48,7 @@ def read_imus(paths: Sequence[Path], init_t: float, rates: bool, sampled: bool) 
     t = ref[:, 0]
     if not rates:
         if t[0] <= init_t:
-            raise files.DataFileError(f"{paths[0]}: line 2, column 't': first increment time {float(t[0])!r} is not after "
-                                      f"the initial state's t = {float(init_t)!r} (row i covers (t[i-1], t[i]])")
+            raise files.first_increment_error(paths[0], t[0], init_t)
         keep = np.ones(t.shape[0], dtype=bool)
     else:
         keep = t >= init_t if sampled else t > init_t

@@ -323,6 +323,22 @@ def _parquet_columns(path: Path) -> list[str]:
         raise DataFileError(f"{path}: cannot read as parquet: {exc}") from None
 
 
+def missing_field(path: Path, lineno: int, name: str, fields: int) -> str:
+    """The one-line error of a row too short to hold column ``name``."""
+    return f"{path}: line {lineno}: column '{name}' is missing (row has {fields} fields)"
+
+
+def not_a_number(path: Path, lineno: int, name: str, cell: str) -> str:
+    """The one-line error of a cell that is not a (finite) number."""
+    return f"{path}: line {lineno}, column '{name}': not a number: {cell!r}"
+
+
+def first_increment_error(path: Path, t_first: float, t0: float) -> DataFileError:
+    """An increment file whose first row does not come after the initial state (row i covers (t[i-1], t[i]])."""
+    return DataFileError(f"{path}: line 2, column 't': first increment time {float(t_first)!r} is not after "
+                         f"the initial state's t = {float(t0)!r} (row i covers (t[i-1], t[i]])")
+
+
 class TableReader:
     """The named columns of a CSV in chunks of rows, checked like :func:`read_table`.
 
@@ -542,11 +558,11 @@ class TableReader:
                 continue
             for name, j in idx.items():
                 if j >= len(row):
-                    return f"{self.path}: line {lineno}: column '{name}' is missing (row has {len(row)} fields)"
+                    return missing_field(self.path, lineno, name, len(row))
                 try:
                     float(row[j])
                 except ValueError:
-                    return f"{self.path}: line {lineno}, column '{name}': not a number: {row[j]!r}"
+                    return not_a_number(self.path, lineno, name, row[j])
         return f"{self.path}: cannot parse as CSV numbers"
 
     @staticmethod

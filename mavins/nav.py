@@ -77,10 +77,7 @@ def run_nav(imu_path: Path, init_path: Path, out_path: Path, opts: NavOptions) -
                 first = True
                 for table in reader.chunks():
                     if first and opts.input == "increments" and table[0, 0] <= init.t:
-                        raise files.DataFileError(
-                            f"{imu_path}: line 2, column 't': first increment time {float(table[0, 0])!r} is not after "
-                            f"the initial state's t = {float(init.t)!r} (row i covers (t[i-1], t[i]])"
-                        )
+                        raise files.first_increment_error(imu_path, table[0, 0], init.t)
                     first = False
                     t1 = time.perf_counter()
                     t_read += t1 - t0
@@ -172,23 +169,17 @@ def _aiding_rows(path: Path, header: list[str], cols: tuple[str, ...], may_be_em
                     continue
                 cells = line.rstrip("\r\n").split(",")
                 if len(cells) < len(header):
-                    raise files.DataFileError(f"{path}: line {lineno}: column '{header[len(cells)]}' is missing "
-                                              f"(row has {len(cells)} fields)")
+                    raise files.DataFileError(files.missing_field(path, lineno, header[len(cells)], len(cells)))
                 row = []
                 for c, j in zip(cols, idx):
                     cell = cells[j].strip()
-                    if cell == "" or cell.lower() == "nan":
-                        if c not in may_be_empty:
-                            raise files.DataFileError(
-                                f"{path}: line {lineno}, column '{c}': not a number: {cells[j]!r}")
-                        row.append(math.nan)
-                        continue
+                    empty = cell == "" or cell.lower() == "nan"
                     try:
-                        v = float(cell)
+                        v = math.nan if empty else float(cell)
                     except ValueError:
-                        v = math.inf
-                    if not math.isfinite(v):
-                        raise files.DataFileError(f"{path}: line {lineno}, column '{c}': not a number: {cells[j]!r}")
+                        v = math.inf  # not a number: refused below
+                    if not (math.isfinite(v) or (empty and c in may_be_empty)):
+                        raise files.DataFileError(files.not_a_number(path, lineno, c, cells[j]))
                     row.append(v)
                 rows.append(row)
     except (OSError, UnicodeDecodeError) as exc:
