@@ -176,16 +176,14 @@ class UdpLink:
             one = decode_one(data)
             if one is not None:
                 out.append((one, addr))
-                if more:
-                    continue
-                break
-            msgs = self.parser.parse_buffer(data) or []
-            out.extend((m, addr) for m in msgs)
-            if self.parser.buf_len() > 0 or not msgs:
-                # each datagram stands alone: a partial frame or no frame at all is garbage
-                reason = "truncated frame" if msgs or self.parser.buf_len() > 0 else "no frame in datagram"
-                out.append((mavlink.MAVLink_bad_data(bytearray(data[:64]), reason), addr))
-                _reset(self.parser)
+            else:
+                msgs = self.parser.parse_buffer(data) or []
+                out.extend((m, addr) for m in msgs)
+                if self.parser.buf_len() > 0 or not msgs:
+                    # each datagram stands alone: a partial frame or no frame at all is garbage
+                    reason = "truncated frame" if msgs or self.parser.buf_len() > 0 else "no frame in datagram"
+                    out.append((mavlink.MAVLink_bad_data(bytearray(data[:64]), reason), addr))
+                    _reset(self.parser)
             if not more:
                 break
         if n:
