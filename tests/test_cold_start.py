@@ -1,6 +1,8 @@
 """A fresh machine and a normal load lose nothing (cold start, readiness, stalls).
 
-``mavins run`` is started with an empty numba cache, as on a user's first run:
+These tests take the path of an install whose kernels were not built ahead of time
+(``MAVINS_AOT=0``: no C compiler at install, or source edited since; tests/test_aot.py covers
+the built kernels). ``mavins run`` is started with an empty numba cache, as on such a first run:
 it must say once that it compiles the navigation kernels, and only then print
 that it is ready. Every sample sent after that line, paced at 300 messages/s for 60 s
 (a fortieth of what the service processes), must be navigated: the alignment
@@ -47,7 +49,7 @@ def _frames(n: int) -> list[bytes]:
 def test_cold_start_then_paced_input_loses_nothing(tmp_path: Path) -> None:
     cache = tmp_path / "numba-cache"
     cache.mkdir()
-    env = {**ENV, "NUMBA_CACHE_DIR": str(cache)}
+    env = {**ENV, "NUMBA_CACHE_DIR": str(cache), "MAVINS_AOT": "0"}
     port = free_udp_port()
     tlog, live, rrd, log_path = tmp_path / "in.tlog", tmp_path / "live.csv", tmp_path / "live.rrd", tmp_path / "svc.log"
     frames = _frames(int(RATE_HZ * SECONDS))
@@ -102,7 +104,7 @@ def test_the_simulators_kernels_do_not_make_the_cache_warm(tmp_path: Path) -> No
     starts; that must not count as the navigation kernels being on disk."""
     code = ("from sim.generate import check_size; from sim.scenarios import load; from mavins.core import jit; "
             "check_size(load('flight'), duration=12.0, rate=None); print(jit.cache_is_warm())")
-    res = subprocess.run([sys.executable, "-c", code], env={**ENV, "NUMBA_CACHE_DIR": str(tmp_path)}, cwd=tmp_path,
+    res = subprocess.run([sys.executable, "-c", code], env={**ENV, "NUMBA_CACHE_DIR": str(tmp_path), "MAVINS_AOT": "0"}, cwd=tmp_path,
                          capture_output=True, text=True, timeout=600)
     assert res.returncode == 0, res.stderr
     assert list(tmp_path.rglob("*.nbi")), "the simulator kernel was not cached"
@@ -115,7 +117,7 @@ def test_demo_cold_start_compiles_once_beside_the_simulation(tmp_path: Path) -> 
     so again if it had to compile them itself)."""
     cache = tmp_path / "numba-cache"
     cache.mkdir()
-    res = mavins("demo", "--duration", "12", "--no-rerun", cwd=tmp_path, env={**ENV, "NUMBA_CACHE_DIR": str(cache)})
+    res = mavins("demo", "--duration", "12", "--no-rerun", cwd=tmp_path, env={**ENV, "NUMBA_CACHE_DIR": str(cache), "MAVINS_AOT": "0"})
     text = res.stdout + res.stderr
     assert res.returncode == 0, text
     assert text.count("compiling the navigation kernels") == 1, text

@@ -15,23 +15,20 @@ depends on it. ``NUMBA_CACHE_DIR``, when set, is respected as is.
 from __future__ import annotations
 
 import functools
-import hashlib
 import os
 from pathlib import Path
 from typing import Any, Callable, TypeVar
 
 import numba
 
+from . import aot
+
 F = TypeVar("F", bound=Callable)
 
 
 def _cache_dir() -> str:
-    digest = hashlib.sha256()
-    for src in sorted(Path(__file__).parent.glob("*.py")):
-        digest.update(src.name.encode())
-        digest.update(src.read_bytes())
     base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "mavins" / "numba"
-    return str(base / f"{numba.__version__}-{digest.hexdigest()[:16]}")
+    return str(base / f"{numba.__version__}-{aot.source_digest(aot.CORE)}")
 
 
 if not os.environ.get("NUMBA_CACHE_DIR"):
@@ -39,15 +36,20 @@ if not os.environ.get("NUMBA_CACHE_DIR"):
 
 
 def cache_is_warm() -> bool:
-    """Whether compiled kernels of this core version are already on disk: numba index files of
-    strapdown.py, which every navigating command loads (the simulator's kernels share the folder
-    and are compiled first by ``mavins demo``: they do not count)."""
-    return any(Path(numba.config.CACHE_DIR).rglob("strapdown.*.nbi"))
+    """Whether compiled kernels of this core version are already on disk: built at install
+    (:mod:`mavins.core.aot`), or numba index files of strapdown.py, which every navigating
+    command loads (the simulator's kernels share the folder and are compiled first by
+    ``mavins demo``: they do not count)."""
+    return aot.has_built("mavins.core") or any(Path(numba.config.CACHE_DIR).rglob("strapdown.*.nbi"))
 
 
 def kernel(func: F) -> F:
-    """Compile ``func`` in nopython mode with the on-disk cache."""
-    return numba.njit(cache=True, nogil=True, error_model="numpy")(func)
+    """Compile ``func`` in nopython mode with the on-disk cache, taking its entry points built
+    ahead of time when there are (:mod:`mavins.core.aot`)."""
+    dispatcher = numba.njit(cache=True, nogil=True, error_model="numpy")(func)
+    if dispatcher is not func:  # not under NUMBA_DISABLE_JIT=1
+        aot.attach(dispatcher)
+    return dispatcher
 
 
 class _FrameBound:
@@ -66,16 +68,21 @@ class _FrameBound:
         entry = self._entries.get(key)
         if entry is None:
             entry = self._entries[key] = _compiled(self.func, args, self.frame)
-        return entry(*args, self.frame)
+        call, built = entry
+        return call(*args) if built else call(*args, self.frame)
 
 
-def _compiled(func: Callable, args: tuple, frame: int) -> Callable:
-    """The entry point of ``func`` for the types of ``args`` and the literal ``frame``, from the
-    disk cache when it is there; ``func`` itself when kernels run as plain Python."""
+def _compiled(func: Callable, args: tuple, frame: int) -> tuple[Callable, bool]:
+    """The entry point of ``func`` for the types of ``args`` and the literal ``frame``, and
+    whether it was built ahead of time (then called without the frame). Else it comes from the
+    disk cache when it is there, or is ``func`` itself when kernels run as plain Python."""
     if not hasattr(func, "compile"):
-        return func
-    sig = tuple(numba.typeof(a) for a in args) + (numba.types.literal(frame),)
-    return func.compile(sig)
+        return func, False
+    types = tuple(numba.typeof(a) for a in args)
+    built = aot.frame_entry(func, frame, types)
+    if built is not None:
+        return built, True
+    return func.compile(types + (numba.types.literal(frame),)), False
 
 
 @functools.lru_cache(maxsize=None)

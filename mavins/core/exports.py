@@ -1,0 +1,41 @@
+"""The core's kernels that Python calls on the live path (``mavins run``, ``mavins demo``),
+built ahead of time with these signatures (:mod:`mavins.core.aot`).
+
+Frames: geographic only (``frame=0``, the default of every command); the other frames compile on
+first use. A call with other argument types compiles as before. ``tests/test_aot.py`` checks that
+the live path calls nothing else and that each signature is the one numba infers.
+"""
+
+from .aot import Export
+
+V = "f8[::1]"  # a C-contiguous float64 vector
+M = "f8[:, ::1]"  # a C-contiguous float64 matrix
+MEASUREMENT = f"Tuple(({V}, {M}, {M}))"  # innovation, H, R of a measurement model
+
+EXPORTS = (
+    Export("strapdown", "push_rate_scalars", f"i8({V}, {V}, f8, f8, f8, f8, f8, f8, f8)", frame=0),
+    Export("strapdown", "solution_row", f"none({V}, {V}, {V})", frame=0),
+    Export("strapdown", "position", f"UniTuple(f8, 3)({V}, {V})", frame=0),
+    Export("strapdown", "init_state", f"{V}(f8, f8, f8, f8, {V}, f8, f8, f8)"),
+    Export("aided", "push_rate_aided",
+           f"i8({V}, {V}, {V}, {M}, {V}, {V}, {V}, f8, f8, f8, f8, f8, f8, f8, i8)", frame=0),
+    Export("aided", "flush_propagation", f"none({V}, {V}, {V}, {M}, {V})", frame=0),
+    Export("kalman", "apply_update", f"Tuple((f8, f8, b1))({V}, {V}, {V}, {M}, {M}, {V}, {M}, f8, {V})"),
+    Export("kalman", "initial_covariance", f"{M}({V}, f8, f8, f8, f8, f8)"),
+    Export("kalman", "gnss_position", f"{MEASUREMENT}({V}, {V}, f8, f8, f8, {V}, f8, f8, f8)"),
+    Export("kalman", "gnss_velocity", f"{MEASUREMENT}({V}, {V}, {V}, {V}, f8, f8, f8)"),
+    Export("kalman", "baro_height", f"{MEASUREMENT}({V}, {V}, f8, f8, f8)"),
+    Export("kalman", "mag_heading", f"{MEASUREMENT}({V}, {V}, f8, f8)"),
+    Export("kalman", "zupt", f"{MEASUREMENT}({V}, f8)"),
+    Export("earth", "gravity", "f8(f8, f8)"),
+    Export("earth", "radii", "UniTuple(f8, 2)(f8)"),
+    Export("earth", "lla_to_ecef", f"{V}(f8, f8, f8)"),
+    Export("earth", "cne_from_latlon", f"{M}(f8, f8)"),
+    Export("earth", "earth_rate_n", f"{V}(f8)"),
+    Export("rotation", "euler_to_quat", f"{V}(f8, f8, f8)"),
+    Export("rotation", "euler_to_dcm", f"{M}(f8, f8, f8)"),
+    Export("rotation", "quat_to_euler", f"{V}({V})"),
+    Export("rotation", "quat_to_dcm", f"{M}({V})"),
+    Export("rotation", "quat_angle_between", f"f8({V}, {V})"),
+    Export("rotation", "quat_angle_rows", f"{V}({M}, {M})"),
+)

@@ -1,0 +1,15 @@
+"""The simulator's kernels that ``mavins demo`` calls from Python, built ahead of time with these
+signatures (:mod:`mavins.core.aot`; ``tests/test_aot.py`` checks them)."""
+
+from mavins.core.aot import Export
+
+V = "f8[::1]"
+M = "f8[:, ::1]"
+C = "f8[:, :, ::1]"
+
+EXPORTS = (
+    Export("kinematics", "integrate",
+           f"none(f8, {V}, i8, f8, f8, f8, {M}, {M}, {C}, i8[::1], {M}, {V}, {M}, b1, {V}, {M}, {M}, {M})"),
+    Export("kinematics", "truth", f"none({V}, {M}, {M}, {C}, i8[::1], {M}, {V}, {M}, {M})"),
+    Export("kinematics", "channel_eval", f"UniTuple(f8, 2)({V}, {V}, {M}, i8, f8)"),
+)
