@@ -891,6 +891,15 @@ def drain(sock: socket.socket) -> list[bytes]:
             return out
 
 
+def _until_heartbeat(sock: socket.socket, key: bytes, got: list[bytes]) -> bool:
+    """Add what ``sock`` holds to ``got``; whether ``got`` now holds a HEARTBEAT signed with ``key``."""
+    got += drain(sock)
+    check = mavlink.MAVLink(None)
+    check.signing.secret_key = key
+    check.robust_parsing = True
+    return any(m.get_type() == "HEARTBEAT" for d in got for m in check.parse_buffer(d) or [])
+
+
 def test_signing_accepts_only_the_key_holder(tmp_path: Path) -> None:
     key_path, key = make_key(tmp_path, "correct horse battery staple")
     run = generate(scenario("rest", [{"kind": "static", "duration": 4.0}], 100.0, roll=3.0, pitch=-2.0, yaw=30.0),
@@ -912,6 +921,7 @@ def test_signing_accepts_only_the_key_holder(tmp_path: Path) -> None:
                 stream.append((s_wrong, imu_frame(wrong, t_us + 1000, (0.5, 0.0, -9.8), (0.3, 0.0, 0.0))))
                 n_wrong += 1
     nav = tmp_path / "nav.csv"
+    got: list[bytes] = []
     with Svc(tmp_path, *nav_args(1.0, "--signing-key", str(key_path), "-o", str(nav))) as svc:
         wall0 = time.monotonic()
         for k, (s, data) in enumerate(stream):
@@ -920,6 +930,8 @@ def test_signing_accepts_only_the_key_holder(tmp_path: Path) -> None:
                 time.sleep(max(0.0, wall0 + k / 2000 - time.monotonic()))
                 wait_for_room(svc.port)
         svc.settle()
+        # the HEARTBEAT goes out once a second of wall time, and the stream may take less than that
+        wait_until(lambda: _until_heartbeat(genuine, key, got), "a HEARTBEAT to the key holder")
         rc = svc.stop()
     assert rc == 0, svc.log()
     c = svc.summary()
@@ -928,7 +940,7 @@ def test_signing_accepts_only_the_key_holder(tmp_path: Path) -> None:
     assert svc.count("rejected_unsigned") == n_unsigned
     assert svc.count("rejected_bad_signature") == n_wrong
     # output goes to the key holder only, and is signed with the key
-    got = drain(genuine)
+    got += drain(genuine)
     assert got and not drain(s_unsigned) and not drain(s_wrong)
     check = mavlink.MAVLink(None)
     check.signing.secret_key = key
