@@ -585,14 +585,15 @@ def cost_notes(b100: dict, b1k: dict, live: dict, service: dict | None) -> tuple
     return lines, out
 
 
-#: (label, file suffix, function name) of the parts the live profile reports.
+#: (label, file suffix, function name) of the parts the live profile reports; suffix "~" is a compiled
+#: function, found by a part of its name (the JIT's and the install-built module's names differ).
 PROFILE_PARTS = (
     ("decode_one (per frame, as UdpLink.receive)", "mavins/link/decode.py", "decode_one"),
     ("Pipeline.handle", "mavins/pipeline.py", "handle"),
     ("  Ingest.sample (validation)", "mavins/link/ingest.py", "sample"),
     ("  Engine.on_imu", "mavins/engine.py", "on_imu"),
     ("    LiveFilter.push", "mavins/aiding.py", "push"),
-    ("      aided.push_rate_aided (compiled strapdown + filter)", "~", "<built-in method mavins.core.aided.push_rate_aided>"),
+    ("      aided.push_rate_aided (compiled strapdown + filter)", "~", "push_rate_aided"),
     ("    LiveFilter._apply (GNSS updates)", "mavins/aiding.py", "_apply"),
     ("    LiveFilter.uncertainty (per output)", "mavins/aiding.py", "uncertainty"),
 )
@@ -622,7 +623,8 @@ def profile_live(seconds: float) -> list[str]:
     total = sum(v[2] for v in stats.values())
     rows = []
     for label, suffix, name in PROFILE_PARTS:
-        ct = sum(v[3] for (f, _, fn), v in stats.items() if fn == name and f.replace(os.sep, "/").endswith(suffix))
+        ct = sum(v[3] for (f, _, fn), v in stats.items()
+                 if (name in fn if suffix == "~" else fn == name) and f.replace(os.sep, "/").endswith(suffix))
         rows.append([label, f"{100.0 * ct / total:.1f} %"])
     n = len(times) - k0
     lines = [(f"cProfile of the budget row's loop ({n:,} frames after {LIVE_WARM_S:g} s; inclusive share of the "
