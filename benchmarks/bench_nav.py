@@ -10,7 +10,8 @@ integrated by
 * the ``mavins nav --timing`` command on a CSV of the same record,
 
 and the first-call costs of a fresh process are measured in subprocesses:
-warm start (numba cache present) and cold compile (empty ``NUMBA_CACHE_DIR``).
+warm start (numba cache present) and cold start (empty ``NUMBA_CACHE_DIR``), with the kernels
+built at install and with the JIT only (``MAVINS_AOT=0``: the compile).
 Ratios are pyins seconds divided by our seconds, both measured in this run.
 
 Run from the repository root::
@@ -321,7 +322,7 @@ def main(argv: Sequence[str] = ()) -> list[dict]:
     p.add_argument("--samples", type=int, default=2, help="mavins samples per update (coning order)")
     p.add_argument("--repeat", type=int, default=3, help="in-process repeats; the best is reported")
     p.add_argument("--no-cli", action="store_true", help="skip the mavins nav CSV round trip")
-    p.add_argument("--no-subprocess", action="store_true", help="skip warm-start and cold-compile rows")
+    p.add_argument("--no-subprocess", action="store_true", help="skip warm-start and cold-start rows")
     args = p.parse_args(list(argv))
     NOTES.clear()
     n, ns, rep = args.n, args.samples, args.repeat
@@ -392,11 +393,13 @@ def main(argv: Sequence[str] = ()) -> list[dict]:
         warm = first_call(_MAVINS_FIRST)
         rows.append(_row("mavins warm start (import + 1st call)", WARMUP_SAMPLES, warm["import_s"] + warm["call_s"],
                          rate=False, note=f"import {warm['import_s']:.2f} s + call {warm['call_s']:.2f} s"))
-        log("cold compile (fresh process, empty NUMBA_CACHE_DIR)")
-        with tempfile.TemporaryDirectory(prefix="bench_nav_numba_") as cache:
-            cold = first_call(_MAVINS_FIRST, {"NUMBA_CACHE_DIR": cache})
-        rows.append(_row("mavins cold compile (import + 1st call)", WARMUP_SAMPLES, cold["import_s"] + cold["call_s"],
-                         rate=False, note=f"import {cold['import_s']:.2f} s + call {cold['call_s']:.2f} s"))
+        for label, aot in (("kernels built at install", "1"), ("JIT only, MAVINS_AOT=0: compile", "0")):
+            log(f"cold start (fresh process, empty NUMBA_CACHE_DIR, {label})")
+            with tempfile.TemporaryDirectory(prefix="bench_nav_numba_") as cache:
+                cold = first_call(_MAVINS_FIRST, {"NUMBA_CACHE_DIR": cache, "MAVINS_AOT": aot})
+            rows.append(_row(f"mavins cold start, {label} (import + 1st call)", WARMUP_SAMPLES,
+                             cold["import_s"] + cold["call_s"], rate=False,
+                             note=f"import {cold['import_s']:.2f} s + call {cold['call_s']:.2f} s"))
         if py_sec is not None:
             log("pyins first call (fresh process; pyins has no numba cache)")
             pyc = first_call(_PYINS_FIRST)

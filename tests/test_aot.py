@@ -1,10 +1,11 @@
 """Kernels built ahead of time (mavins/core/aot.py): loaded, complete, and the JIT's very code.
 
-The install builds every kernel the live path and the simulator call from Python into an
-extension module per package. These tests hold it to four things: the modules of the current
-source are there and loaded; each export's signature is the one numba infers for those
-argument types; the demo's computation gives the same bytes with and without them; and the
-demo's whole path, started on an empty numba cache, compiles nothing.
+The install builds every kernel the live path, ``mavins nav`` and the simulator call from Python
+into an extension module per package. These tests hold it to four things: the modules of the
+current source are there and loaded; each export's signature is the one numba infers for those
+argument types; the demo's computation and ``mavins nav``'s files are the same bytes with and
+without them; and the demo's whole path and ``mavins nav`` with aiding files, started on an
+empty numba cache, compile nothing.
 """
 
 from __future__ import annotations
@@ -90,3 +91,20 @@ def test_the_module_name_follows_every_byte_of_the_source(tmp_path: Path) -> Non
     assert aot.source_digest(a) != aot.source_digest(b)
     assert aot.module_name("mavins.core") == "_kernels_" + aot.source_digest(aot.CORE)
     assert aot.module_name("sim") == "_kernels_" + aot.source_digest(aot.CORE.parents[1] / "sim", aot.CORE)
+
+
+def test_mavins_nav_on_an_empty_cache_compiles_nothing_and_writes_the_jits_bytes(tmp_path: Path) -> None:
+    """The batch strapdown run and the batch filter (``--gnss``, ``--baro``), built ahead of time."""
+    res = mavins("sim", "flight", "-o", "d", "--duration", "30", "--grade", "consumer", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    cache = tmp_path / "numba-cache"
+    for aiding in ((), ("--gnss", "d/gnss.csv", "--baro", "d/baro.csv")):
+        outputs = {}
+        for flag, env in (("1", {"NUMBA_CACHE_DIR": str(cache)}), ("0", {})):
+            out = tmp_path / f"nav{flag}.csv"
+            res = mavins("nav", "d/imu.csv", "--init", "d/init.json", "-o", str(out), *aiding, cwd=tmp_path,
+                         env={**ENV, **env, "MAVINS_AOT": flag})
+            assert res.returncode == 0, res.stderr
+            outputs[flag] = out.read_bytes()
+        assert not list(cache.rglob("*.nbi")), sorted(p.name for p in cache.rglob("*.nbi"))
+        assert outputs["1"] == outputs["0"] and outputs["1"].count(b"\n") > 1000

@@ -1,8 +1,8 @@
 """Kernels built ahead of time, so that a first start loads compiled code instead of compiling it.
 
 Numba compiles a kernel on its first call (about 20 s for what ``mavins demo`` calls, on two
-cores) and keeps it in its disk cache. The kernels that Python calls on the live path and in the
-simulator are also built once, at install time, into an extension module per package
+cores) and keeps it in its disk cache. The kernels that Python calls on the live path, in
+``mavins nav`` and in the simulator are also built once, at install time, into an extension module per package
 (numba's ``numba.pycc``, from the very same source): ``mavins/core/_kernels_<digest>`` and
 ``sim/_kernels_<digest>``. Each package lists those entry points with their signatures in its
 ``exports.py``.
@@ -187,7 +187,7 @@ def is_built(package: str) -> bool:
 
 def build_each(outputs: dict[str, Path | None]) -> dict[str, str]:
     """Build each package of ``outputs`` into its folder there (None: beside its source), each in
-    a fresh interpreter and side by side (half a minute of one core each). Returns, per package,
+    a fresh interpreter and side by side (up to a minute of one core each). Returns, per package,
     the built module's path or the last line of the error that stopped it."""
     root = CORE.parents[1]
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, (str(root), os.environ.get("PYTHONPATH"))))}
@@ -215,7 +215,7 @@ def main(argv: list[str] | None = None) -> int:
         packages = [p for p in packages if not is_built(p)]
     if not packages:
         return 0
-    print(f"mavins: building the kernels of {', '.join(packages)} ahead of time (about half a minute)",
+    print(f"mavins: building the kernels of {', '.join(packages)} ahead of time (about a minute)",
           file=sys.stderr, flush=True)
     failed = 0
     for package, line in build_each(dict.fromkeys(packages)).items():

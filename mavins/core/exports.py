@@ -1,5 +1,6 @@
-"""The core's kernels that Python calls on the live path (``mavins run``, ``mavins demo``),
-built ahead of time with these signatures (:mod:`mavins.core.aot`).
+"""The core's kernels that Python calls on the live path (``mavins run``, ``mavins demo``) and in
+``mavins nav`` (the batch strapdown and filter runs), built ahead of time with these signatures
+(:mod:`mavins.core.aot`).
 
 Frames: geographic only (``frame=0``, the default of every command); the other frames compile on
 first use. A call with other argument types compiles as before. ``tests/test_aot.py`` checks that
@@ -10,12 +11,17 @@ from .aot import Export
 
 V = "f8[::1]"  # a C-contiguous float64 vector
 M = "f8[:, ::1]"  # a C-contiguous float64 matrix
+C = "f8[:, :, ::1]"  # a C-contiguous float64 array of matrices
 MEASUREMENT = f"Tuple(({V}, {M}, {M}))"  # innovation, H, R of a measurement model
 
 EXPORTS = (
     Export("strapdown", "push_rate_scalars", f"i8({V}, {V}, f8, f8, f8, f8, f8, f8, f8)", frame=0),
     Export("strapdown", "solution_row", f"none({V}, {V}, {V})", frame=0),
     Export("strapdown", "position", f"UniTuple(f8, 3)({V}, {V})", frame=0),
+    Export("strapdown", "_run_increments", f"i8({V}, {V}, {V}, {M}, {M}, {M})", frame=0),
+    Export("strapdown", "_run_rates", f"i8({V}, {V}, {V}, {M}, {M}, {M})", frame=0),
+    Export("aided", "run_aided", f"UniTuple(i8, 2)({V}, {V}, {V}, {M}, {M}, {M}, {M}, {M}, {M}, {V}, {V}, f8, f8, i8, "
+                                 f"{M}, {V}, {M}, i8[:, ::1], {M}, {C}, i8)"),
     Export("strapdown", "init_state", f"{V}(f8, f8, f8, f8, {V}, f8, f8, f8)"),
     Export("aided", "push_rate_aided",
            f"i8({V}, {V}, {V}, {M}, {V}, {V}, {V}, f8, f8, f8, f8, f8, f8, f8, i8)", frame=0),

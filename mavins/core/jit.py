@@ -85,6 +85,17 @@ def _compiled(func: Callable, args: tuple, frame: int) -> tuple[Callable, bool]:
     return func.compile(types + (numba.types.literal(frame),)), False
 
 
+def call_for_frame(func: Callable, frame: int, *args: Any) -> Any:
+    """``func(*args, frame)`` for a batch call: through its entry point built ahead of time when
+    there is one for these argument types (found by their numba types, a few microseconds), else
+    through numba's dispatcher (which compiles or loads the overload for the literal frame)."""
+    if hasattr(func, "compile"):
+        built = aot.frame_entry(func, frame, tuple(numba.typeof(a) for a in args))
+        if built is not None:
+            return built(*args)
+    return func(*args, frame)
+
+
 @functools.lru_cache(maxsize=None)
 def for_frame(func: Callable, frame: int) -> Callable:
     """``func(*args, frame)`` as a Python callable with ``frame`` a compile-time constant.

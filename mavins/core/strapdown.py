@@ -52,7 +52,7 @@ from .coning import (
     rate_sculling,
     rotation_compensation,
 )
-from .jit import kernel
+from .jit import call_for_frame, kernel
 from .rotation import (
     SMALL_ANGLE,
     Mat9,
@@ -1008,7 +1008,7 @@ def run_increments(
     ``out`` needs at least ``len(t) // N`` rows; returns the number written.
     The frame reaches the kernel as a compile-time constant (:func:`kernel_frame`).
     """
-    return _run_increments(s, cfg, t, dtheta, dv, out, kernel_frame(cfg))
+    return call_for_frame(_run_increments, kernel_frame(cfg), s, cfg, t, dtheta, dv, out)
 
 
 @kernel
@@ -1028,7 +1028,7 @@ def _run_increments(s: np.ndarray, cfg: np.ndarray, t: np.ndarray, dtheta: np.nd
 def run_rates(s: np.ndarray, cfg: np.ndarray, t: np.ndarray, w: np.ndarray, f: np.ndarray, out: np.ndarray) -> int:
     """Batch loop over rate rows (rows before the state's time are skipped); the frame as in
     :func:`run_increments`."""
-    return _run_rates(s, cfg, t, w, f, out, kernel_frame(cfg))
+    return call_for_frame(_run_rates, kernel_frame(cfg), s, cfg, t, w, f, out)
 
 
 @kernel
