@@ -878,3 +878,593 @@ def test_ulog_magnetometer_without_its_fields_and_repeated_nan(tmp_path: Path) -
     data = ulog([(*SC, sc_rows([1000, 2000])), (*MAG, [(500, math.nan, 0.0, 0.0), (1500, 0.0, math.nan, 0.0)])])
     _, report = read_all(write(tmp_path, "b.ulg", data))
     assert report.rejected == {"vehicle_magnetometer": 2}
+
+
+# -- the command layer: replay() on small hand-written logs -----------------------------------------
+#
+# A vehicle at rest: HIGHRES_IMU with specific force (0, 0, -g) m/s^2 in FRD (gravity seen as an upward
+# reaction) and no rotation, 100 Hz from sensor time 1.00 s. With --lat/--lon/--alt given, --align 0.5
+# and --rate 10 the alignment ends at 1.50 s and rows follow at 10 Hz until the last sample at 1.99 s.
+
+from mavins.engine import EngineConfig  # noqa: E402
+from mavins.link.ingest import IngestConfig  # noqa: E402
+
+G_STD = 9.80665
+AT_REST = dict(lat=10.0, lon=20.0, alt=30.0, align=0.5, heading=0.0, rate=10.0)
+NO_GNSS_NOTE = ("note: no GNSS message in the log (GPS_RAW_INT, GPS_INPUT, HIL_GPS; PX4 vehicle_gps_position/"
+                "sensor_gps, ArduPilot GPS): the position is free inertial")
+ANY_IMU = "IMU messages (HIGHRES_IMU, RAW_IMU, SCALED_IMU*)"
+
+
+def rest_imu(mav: mavlink.MAVLink, t_us: int, gx: float = 0.0, imu_id: int = 0, az: float = -G_STD) -> bytes:
+    m = mav.highres_imu_encode(t_us, 0.0, 0.0, az, gx, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, ACC_GYRO, imu_id)
+    return rec(t_us, m.pack(mav))
+
+
+def rest_records(n: int, first_us: int = 1_000_000, step_us: int = 10_000, **kw: float) -> bytes:
+    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    return b"".join(rest_imu(mav, first_us + k * step_us, **kw) for k in range(n))
+
+
+def run(path: Path, out: Path | None = None, ingest: IngestConfig | None = None, **engine: float):
+    return replay.replay(path, EngineConfig(**engine), ingest or IngestConfig(), out)
+
+
+def test_replay_at_rest_writes_a_row_per_output_and_counts_everything(tmp_path: Path) -> None:
+    """100 messages, first/last sensor time 1.00/1.99 s, one CSV row and one callback per output, the note."""
+    log = write(tmp_path, "rest.tlog", rest_records(100))
+    out = tmp_path / "nav.csv"
+    seen = []
+    res = replay.replay(log, EngineConfig(**AT_REST), IngestConfig(), out,
+                        on_output=lambda sol, pipe: seen.append((float(sol.row[0]), pipe)))
+    lines = out.read_text().splitlines()
+    assert lines[0] == "t,lat,lon,h,vn,ve,vd,roll,pitch,yaw,qw,qx,qy,qz"
+    rows = [[float(x) for x in line.split(",")] for line in lines[1:]]
+    assert (res.messages, res.t_first, res.t_last) == (100, 1.0, 1.99)
+    assert res.outputs == len(rows) == len(seen) and res.outputs >= 4  # at least 1.6, 1.7, 1.8, 1.9 s
+    assert [t for t, _ in seen] == [r[0] for r in rows]
+    assert all(p is res.pipeline for _, p in seen)
+    assert all(1.5 <= r[0] <= 1.99 for r in rows) and [r[0] for r in rows] == sorted({r[0] for r in rows})
+    assert all(abs(r[1] - 10.0) < 1e-6 and abs(r[2] - 20.0) < 1e-6 and abs(r[3] - 30.0) < 0.01 for r in rows)
+    assert res.pipeline.engine.state.value == "NAVIGATING" and res.pipeline.ingest.accepted == 100
+    assert res.pipeline.take_events() == []  # drained after every message
+    assert res.aiding == {} and res.report is not None and res.report.notes == [NO_GNSS_NOTE]
+    assert res.report.lines() == [f"{log}: {NO_GNSS_NOTE}"]
+
+
+def test_replay_without_an_output_file_still_counts_outputs(tmp_path: Path) -> None:
+    """With no -o the rows are counted all the same; nothing is written beside the log."""
+    log = write(tmp_path, "rest.tlog", rest_records(100))
+    res = run(log, **AT_REST)
+    assert res.outputs >= 4 and res.messages == 100
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rest.tlog"]
+
+
+def test_replay_counts_aiding_messages_by_type_and_needs_no_note_with_gnss(tmp_path: Path) -> None:
+    """GPS_RAW_INT and SCALED_PRESSURE are counted by type (HEARTBEAT is not); a GNSS fix gives the position."""
+    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    gps = [mav.gps_raw_int_encode(t, 3, 100_000_000, 200_000_000, 30_000, 100, 150, 0, 0, 10) for t in
+           (1_000_000, 1_500_000)]
+    baro = [mav.scaled_pressure_encode(t_ms, 1013.25, 0.0, 2000) for t_ms in (1000, 1250, 1500)]
+    data = rec(1, v1_heartbeat())
+    for k in range(100):
+        t = 1_000_000 + k * 10_000
+        data += b"".join(rec(t, m.pack(mav)) for m in gps if m.time_usec == t)
+        data += b"".join(rec(t, m.pack(mav)) for m in baro if m.time_boot_ms * 1000 == t)
+        data += rest_imu(mav, t)
+    log = write(tmp_path, "aided.tlog", data)
+    res = run(log, align=0.5, heading=0.0, rate=10.0)
+    assert res.aiding == {"GPS_RAW_INT": 2, "SCALED_PRESSURE": 3}
+    assert res.messages == 1 + 2 + 3 + 100 and res.outputs >= 4
+    assert res.report.notes == [] and res.report.lines() == []
+
+
+def test_replay_places_damage_at_the_sensor_time_before_it(tmp_path: Path) -> None:
+    """Junk before the first IMU sample has no time; junk after sample k has sample k's time (s)."""
+    first, second = rest_records(50), rest_records(50, first_us=1_500_000)
+    junk = b"\x01" * 20
+    log = write(tmp_path, "d.tlog", junk + first + junk + second)
+    res = run(log, **AT_REST)
+    assert res.report.skipped == [[0, 20, None], [20 + len(first), 20, 1.49]]
+    assert res.report.lines()[0] == (
+        f"{log}: skipped 40 unreadable bytes ({100 * 40 / (40 + 2 * len(first)):.2g} % of the file) in 2 places: "
+        f"byte 0 (20 bytes, before the first IMU sample), byte {20 + len(first)} (20 bytes, after sensor time "
+        "1.490 s)")
+    assert res.messages == 2 + 100  # each stretch of junk is one BAD_DATA
+
+
+def test_replay_places_damage_after_the_last_message_at_the_last_sample(tmp_path: Path) -> None:
+    """DataFlash junk at the very end yields no message: it gets the time of the last IMU sample."""
+    imus = b"".join(df_imu(1_000_000 + k * 10_000, gyr=(0.0, 0.0, 0.0), acc=(0.0, 0.0, -G_STD)) for k in range(100))
+    head = df_head() + imus
+    log = write(tmp_path, "d.bin", head + b"\x01\x02\x03\x04")
+    res = run(log, **AT_REST)
+    assert res.report.skipped == [[len(head), 4, 1.99]]
+    assert (res.messages, res.t_first, res.t_last) == (100, 1.0, 1.99)
+
+
+def test_replay_refuses_an_output_that_is_the_log_or_the_rerun_file(tmp_path: Path) -> None:
+    """-o onto the log, or -o and --rerun onto one file, is refused before reading; the log stays."""
+    data = rest_records(10)
+    log = write(tmp_path, "rest.tlog", data)
+    with pytest.raises(DataFileError) as e:
+        run(log, log, **AT_REST)
+    assert str(e.value) == (f"{log}: -o is also the input LOG: writing it would destroy the input; choose another "
+                            "output file")
+    out = tmp_path / "o.csv"
+    with pytest.raises(DataFileError) as e:
+        replay.replay(log, EngineConfig(**AT_REST), IngestConfig(), out, rerun=out)
+    assert str(e.value) == f"{out}: -o and --rerun name the same file; choose two files"
+    assert log.read_bytes() == data and not out.exists()
+
+
+def test_iter_log_gives_the_messages_of_open_log(tmp_path: Path) -> None:
+    """iter_log is the message stream alone, in file order, with the fraction read."""
+    log = write(tmp_path, "r.tlog", rest_records(3))
+    got = [(f, m.time_usec) for f, m in replay.iter_log(log)]
+    n = len(rest_records(1))
+    assert got == [(n / (3 * n), 1_000_000), (2 / 3, 1_010_000), (1.0, 1_020_000)]
+    with pytest.raises(DataFileError, match="no such file"):
+        replay.iter_log(tmp_path / "none.tlog")
+
+
+# -- why no IMU sample was accepted (_no_imu) ----------------------------------------------------------
+
+
+def no_imu(path: Path, ingest: IngestConfig | None = None) -> str:
+    out = path.parent / "never.csv"
+    with pytest.raises(DataFileError) as e:
+        run(path, out, ingest, **AT_REST)
+    assert not out.exists()  # nothing written on failure
+    return str(e.value)
+
+
+def unknown_frame() -> bytes:
+    """A MAVLink 2 frame of message id 9999 (in no dialect): pymavlink decodes it as UNKNOWN_9999."""
+    return b"\xfd\x00\x00\x00\x00\x01\x01\x0f\x27\x00\x00\x00"
+
+
+def test_no_imu_lists_the_messages_the_log_holds(tmp_path: Path) -> None:
+    """BAD_DATA and UNKNOWN_* are not named; the others are counted by type."""
+    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    baro = mav.scaled_pressure_encode(5, 1000.0, 0.0, 0).pack(mav)
+    data = (rec(1, v1_heartbeat()) + rec(2, unknown_frame()) + b"\x01" * 20 + rec(3, v1_heartbeat())
+            + rec(4, baro) + rec(5, v1_heartbeat()))
+    log = write(tmp_path, "hb.tlog", data)
+    assert no_imu(log) == f"{log}: expected {ANY_IMU}, found none among 4 messages (3 HEARTBEAT, 1 SCALED_PRESSURE)"
+
+
+def test_no_imu_in_a_tlog_of_junk(tmp_path: Path) -> None:
+    """A tlog of which no byte is a frame: the size is named."""
+    log = write(tmp_path, "j.tlog", bytes(range(1, 40)))
+    assert no_imu(log) == f"{log}: expected a MAVLink telemetry log (.tlog), found no valid MAVLink message in 39 bytes"
+
+
+def test_no_imu_in_a_dataflash_log_names_its_unreadable_bytes(tmp_path: Path) -> None:
+    """A DataFlash log of FMTs only; and one with 5 bytes that are no record."""
+    head = df_head()
+    log = write(tmp_path, "f.bin", head)
+    want = f"expected an ArduPilot DataFlash log (.bin) with {ANY_IMU}, found no IMU record in {len(head)} bytes"
+    assert no_imu(log) == f"{log}: {want}"
+    log = write(tmp_path, "g.bin", head + b"\x01\x02\x03\x04\x05")
+    want = f"with {ANY_IMU}, found no IMU record in {len(head) + 5} bytes (5 bytes are no DataFlash record)"
+    assert no_imu(log) == f"{log}: expected an ArduPilot DataFlash log (.bin) {want}"
+
+
+def test_no_imu_in_a_dataflash_log_with_a_gps_only(tmp_path: Path) -> None:
+    """The made-up GPS_RAW_INT is what the log holds."""
+    log = write(tmp_path, "g.bin", df_head() + df_gps(1))
+    assert no_imu(log) == f"{log}: expected {ANY_IMU}, found none among 1 messages (1 GPS_RAW_INT)"
+
+
+def test_no_imu_names_the_imu_streams_that_were_not_chosen(tmp_path: Path) -> None:
+    """The wanted kind, id and system, and the IMU streams found (3 shown) with the rejection reasons."""
+    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    other = mavlink.MAVLink(None, srcSystem=7, srcComponent=1)
+    raw = other.raw_imu_encode(1, 0, 0, 1000, 0, 0, 0, 0, 0, 0, 2, 0)
+    data = b"".join(rest_imu(mav, t, imu_id=4) for t in (1, 2, 3)) + rec(4, raw.pack(other)) + rec(5, raw.pack(other))
+    data += rec(6, mav.scaled_imu_encode(6, 0, 0, 1000, 0, 0, 0, 0, 0, 0, 0).pack(mav))
+    data += rec(7, mav.scaled_imu2_encode(7, 0, 0, 1000, 0, 0, 0, 0, 0, 0, 0).pack(mav))
+    log = write(tmp_path, "ids.tlog", data)
+    got = no_imu(log, IngestConfig(message="HIGHRES_IMU", imu_id=3, target_system=7))
+    assert got == (f"{log}: expected HIGHRES_IMU messages with id 3 from system 7, found only 3 HIGHRES_IMU id 4 from "
+                   "system 1, 2 RAW_IMU id 2 from system 7, 1 SCALED_IMU id 0 from system 1 and 1 more types "
+                   "(rejected: 5 other_system, 2 other_imu)")
+    got = no_imu(log, IngestConfig(imu_id=9))
+    assert got.startswith(f"{log}: expected {ANY_IMU} with id 9, found only 3 HIGHRES_IMU id 4 from system 1, ")
+    assert got.endswith(" (rejected: 7 other_imu)")
+
+
+def test_no_imu_in_a_ulog_whose_samples_are_all_out_of_range(tmp_path: Path) -> None:
+    """sensor_combined rows beyond the 16 g accelerometer range are rejected by reason."""
+    rows = [(t, 0.0, 0.0, 0.0, 0.0, 0.0, -200.0) for t in (1000, 2000)]
+    log = write(tmp_path, "r.ulg", ulog([(*SC, rows)]))
+    assert no_imu(log) == (f"{log}: expected {ANY_IMU}, found only 2 HIGHRES_IMU id 0 from system 1 "
+                           "(rejected: 2 out_of_range)")
+
+
+# -- why no solution row came (_no_solution) ---------------------------------------------------------
+
+
+def no_solution(path: Path, **engine: float) -> str:
+    with pytest.raises(DataFileError) as e:
+        run(path, path.parent / "never.csv", **engine)
+    assert not (path.parent / "never.csv").exists()
+    return str(e.value)
+
+
+def test_no_solution_without_a_position(tmp_path: Path) -> None:
+    """No --lat/--lon/--alt and no fix in the log: the engine waits for a position."""
+    log = write(tmp_path, "w.tlog", rest_records(100))
+    assert no_solution(log, align=0.5) == (
+        f"{log}: no solution rows from 100 IMU samples: no initial position: give --lat, --lon and --alt (the log "
+        "has no GPS_RAW_INT or GLOBAL_POSITION_INT fix)")
+
+
+def test_no_solution_when_the_alignment_is_longer_than_the_log(tmp_path: Path) -> None:
+    """50 samples span 1.00 .. 1.49 s: 0.49 s of data for a 10 s alignment (shown to 0.1 s)."""
+    log = write(tmp_path, "a.tlog", rest_records(50))
+    assert no_solution(log, lat=1.0, lon=2.0, alt=3.0, align=10.0) == (
+        f"{log}: no solution rows from 50 IMU samples: the alignment (--align 10 s at rest) did not finish in the "
+        "0.5 s of IMU data")
+    log = write(tmp_path, "b.tlog", rest_records(50, first_us=3_000_000))
+    assert no_solution(log, lat=1.0, lon=2.0, alt=3.0, align=2.25).endswith(
+        ": the alignment (--align 2.25 s at rest) did not finish in the 0.5 s of IMU data")
+
+
+def test_no_solution_counts_alignment_restarts_on_motion(tmp_path: Path) -> None:
+    """Two samples turning at 1 rad/s (above --motion-gyro 0.1) restart the alignment twice."""
+    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    data = b"".join(rest_imu(mav, 1_000_000 + k * 10_000, gx=1.0 if k in (10, 30) else 0.0) for k in range(50))
+    log = write(tmp_path, "m.tlog", data)
+    assert no_solution(log, lat=1.0, lon=2.0, alt=3.0, align=10.0) == (
+        f"{log}: no solution rows from 50 IMU samples: the alignment (--align 10 s at rest) did not finish in the "
+        "0.5 s of IMU data; it restarted 2 times on motion")
+
+
+def test_no_solution_when_the_alignment_ends_on_the_last_sample(tmp_path: Path) -> None:
+    """A 0.49 s alignment over samples 1.00 .. 1.49 s ends on the last one: navigating, but no row yet."""
+    log = write(tmp_path, "n.tlog", rest_records(50))
+    assert no_solution(log, lat=1.0, lon=2.0, alt=3.0, align=0.49, rate=10.0) == (
+        f"{log}: no solution rows from 50 IMU samples: final state NAVIGATING")
+
+
+# -- damaged ULogs: pyulog's loop guard and its corruption flag ---------------------------------------
+
+ULOG_HEADER = b"ULog\x01\x12\x35\x01" + struct.pack("<Q", 0)  # magic, version 1, start time 0
+
+
+def test_ulog_reader_going_in_circles_is_stopped_with_where(tmp_path: Path) -> None:
+    """A message header of type 0 and size 5 with 4 bytes left: pyulog reads 3 + 4 bytes from byte 16, then seeks
+    back 2 + 5 bytes to byte 16, again and again; the 21st revisit of byte 16 stops it."""
+    log = write(tmp_path, "loop.ulg", ULOG_HEADER + struct.pack("<HB", 5, 0) + b"\x01\x02\x03\x04")
+    with pytest.raises(DataFileError) as e:
+        open_log(log)
+    assert str(e.value) == f"{log}: not a readable ULog: its reader went in circles near byte 16 (damaged records)"
+
+
+def test_read_tracker_allows_twenty_revisits_of_one_position(tmp_path: Path) -> None:
+    """Reads that get no further: the 21st read from one position raises; progress forgets the count."""
+    f = write(tmp_path, "f.bin", bytes(range(64)))
+    with open(f, "rb") as fh:
+        tr = replay._ReadTracker(fh)
+        assert tr.read(3) == b"\x00\x01\x02" and tr.header_at == 0 and tr.last == (0, 3, 3)
+        for _ in range(20):
+            tr.seek(0)
+            assert tr.read(2) == b"\x00\x01"
+        assert tr.last == (0, 2, 2) and tr.header_at == 0
+        tr.seek(0)
+        with pytest.raises(replay._Stuck, match=r"^its reader went in circles near byte 0 \(damaged records\)$"):
+            tr.read(1)
+    with open(f, "rb") as fh:
+        tr = replay._ReadTracker(fh)
+        tr.read(8)
+        for _ in range(20):
+            tr.seek(4)
+            tr.read(1)
+        tr.seek(8)
+        assert tr.read(3) == b"\x08\x09\x0a" and tr.header_at == 8  # further than before: the visits are forgotten
+        for _ in range(20):
+            tr.seek(4)
+            tr.read(1)
+        tr.seek(60)
+        assert tr.read(8) == b"\x3c\x3d\x3e\x3f" and tr.last == (60, 8, 4) and tr.header_at == 8
+        tr.seek(0)
+        assert tr.read() == bytes(range(64)) and tr.last == (0, -1, 64)
+
+
+def test_read_tracker_stops_after_200000_reads_without_progress(tmp_path: Path) -> None:
+    """Each position read once, but 200,000 reads in a row without getting further: the next one raises."""
+    f = write(tmp_path, "f.bin", bytes(200_002))
+    with open(f, "rb") as fh:
+        tr = replay._ReadTracker(fh)
+        tr.read(200_002)
+        read = tr.read
+        seek = fh.seek
+        for pos in range(200_000):
+            seek(pos)
+            read(1)
+        seek(200_000)
+        with pytest.raises(replay._Stuck, match="near byte 200000 "):
+            read(1)
+
+
+def test_ulog_data_of_an_unsubscribed_id_is_noted_as_corruption(tmp_path: Path) -> None:
+    """A data message of msg_id 99 (never added): pyulog flags the file corrupt and reads on; nothing is printed."""
+    full = ulog([(*SC, sc_rows([1000, 2000, 3000]))])
+    last = 3 + 2 + 8 + 24  # the last D message: header, msg_id, timestamp, six floats
+    data = full[:-last] + ulog_msg(b"D", struct.pack("<H", 99) + bytes(8)) + full[-last:]
+    msgs, report = read_all(write(tmp_path, "c.ulg", data))
+    assert [m.time_usec for _, m in msgs] == [1000, 2000, 3000]
+    assert report.notes == ["corrupt data inside the ULog was skipped by its reader (pyulog: no byte offsets)"]
+    assert report.cut_at is None and report.skipped == []
+    _, report = read_all(write(tmp_path, "ok.ulg", full))
+    assert report.notes == []
+
+
+def test_ulog_corruption_is_not_printed(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """pyulog prints a warning for the unknown id: the replay says it in the report instead."""
+    full = ulog([(*SC, sc_rows([1000]))])
+    read_all(write(tmp_path, "c.ulg", full + ulog_msg(b"D", struct.pack("<H", 99) + bytes(8))))
+    assert capsys.readouterr().out == ""
+
+
+def test_ulog_without_imu_rows_says_where_it_was_cut(tmp_path: Path) -> None:
+    """sensor_combined added but no row: refused; a cut inside a header is named with its byte."""
+    data = ulog([(*SC, [])])
+    log = write(tmp_path, "e.ulg", data)
+    with pytest.raises(DataFileError) as e:
+        open_log(log)
+    assert str(e.value) == f"{log}: expected IMU data (the sensor_combined topic), found none in the ULog"
+    log = write(tmp_path, "f.ulg", data + b"\x05")
+    with pytest.raises(DataFileError) as e:
+        open_log(log)
+    assert str(e.value) == (f"{log}: expected IMU data (the sensor_combined topic), found none in the ULog (it ends "
+                            f"inside a record at byte {len(data)}: cut short?)")
+
+
+def test_ulog_header_too_short_is_not_a_readable_ulog(tmp_path: Path) -> None:
+    """The 7 magic bytes and no more: pyulog's own reason is passed on."""
+    log = write(tmp_path, "s.ulg", ULOG_HEADER[:7])
+    with pytest.raises(DataFileError) as e:
+        open_log(log)
+    assert str(e.value) == f"{log}: not a readable ULog: Invalid file format (Header too short)"
+
+
+# -- a bad CRC beyond the tlog reader's first 1 MiB chunk --------------------------------------------
+
+
+def test_tlog_bad_crc_beyond_the_first_chunk_is_skipped_at_its_file_offset(tmp_path: Path) -> None:
+    """A record failing its CRC after the first 1 MiB is skipped from its first byte, in file bytes."""
+    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    one = b"".join(rec(i, imu_frame(mav, i)) for i in range(256))
+    body = one * ((1 << 20) // len(one) + 1)
+    bad = bytearray(rec(7, imu_frame(mav, 7)))
+    bad[-1] ^= 0xFF
+    good = rec(8, imu_frame(mav, 8))
+    msgs, report = read_all(write(tmp_path, "a.tlog", body + bytes(bad) + good))
+    assert report.skipped == [[len(body), len(bad), None]] and report.cut_at is None
+    assert types(msgs[-2:]) == ["BAD_DATA", "HIGHRES_IMU"] and msgs[-1][1].time_usec == 8
+    assert msgs[-2][0] == (len(body) + len(bad)) / (len(body) + len(bad) + len(good))
+
+
+# -- what the user is told about a file that is not what its name says --------------------------------
+
+
+@pytest.mark.parametrize("name, data, said", [
+    ("a.tlog", ULOG_HEADER, "expected a MAVLink telemetry log (.tlog), found a PX4 ULog (rename it to .ulg)"),
+    ("a.tlog", b"\xa3\x95\x80" + bytes(20), "expected a MAVLink telemetry log (.tlog), found an ArduPilot DataFlash "
+                                            "log (rename it to .bin)"),
+    ("a.tlog", b"t,lat,lon\n1,2,3\n", "expected a MAVLink telemetry log (.tlog), found a text file"),
+    ("a.bin", b"\x1f\x8b\x08\x00" + bytes(12), "expected an ArduPilot DataFlash log (.bin), found a gzip file"),
+    ("a.ulg", b"PK\x03\x04" + bytes(12), "expected a PX4 ULog (.ulg), found a zip file"),
+    ("a.ulg", b"RRF2" + bytes(12), "expected a PX4 ULog (.ulg), found a Rerun recording"),
+    ("a.bin", bytes(8) + b"\xfd" + bytes(30), "expected an ArduPilot DataFlash log (.bin) starting with bytes a3 95, "
+                                              "found bytes 00 00 00 00 00 00 00 00"),
+    ("a.ulg", b"\x01\x02\xff", "expected a PX4 ULog (.ulg) starting with 'ULog', found bytes 01 02 ff"),
+    ("a.ulg", b"\xa3\x95" + bytes(10), "expected a PX4 ULog (.ulg), found an ArduPilot DataFlash log (rename it to "
+                                       ".bin)"),
+])
+def test_mislabelled_file_is_named_by_what_it_is(tmp_path: Path, name: str, data: bytes, said: str) -> None:
+    """The one-line refusal says what was expected, what the bytes are, and the suffix to rename to."""
+    log = write(tmp_path, name, data)
+    with pytest.raises(DataFileError) as e:
+        open_log(log)
+    assert str(e.value) == f"{log}: {said}"
+
+
+def test_tlog_of_unknown_bytes_is_read_as_a_damaged_tlog(tmp_path: Path) -> None:
+    """A .tlog has no magic: bytes of no known kind are read, not refused. With no frame marker in the first read
+    the last 8 bytes may be the time of a record still to come: 22 bytes are skipped, and the 8 left are a cut."""
+    msgs, report = read_all(write(tmp_path, "a.tlog", b"\x01\x02\xff" * 10))
+    assert types(msgs) == ["BAD_DATA"] and report.skipped == [[0, 22, None]] and report.cut_at == 22
+
+
+def test_open_log_messages_for_missing_unknown_and_empty_files(tmp_path: Path) -> None:
+    """Exact one-line messages: no such file, an unknown suffix, an empty file of each kind."""
+    with pytest.raises(DataFileError) as e:
+        open_log(tmp_path / "none.ulg")
+    assert str(e.value) == f"{tmp_path / 'none.ulg'}: no such file"
+    with pytest.raises(DataFileError) as e:
+        open_log(tmp_path)
+    assert str(e.value) == f"{tmp_path}: no such file"
+    log = write(tmp_path, "log.TXT", b"x")
+    with pytest.raises(DataFileError) as e:
+        open_log(log)
+    assert str(e.value) == f"{log}: unknown log type '.txt' (expected .tlog, .bin or .ulg)"
+    for name, kind in [("e.tlog", "a MAVLink telemetry log (.tlog)"), ("e.BIN", "an ArduPilot DataFlash log (.bin)"),
+                       ("e.ulg", "a PX4 ULog (.ulg)")]:
+        log = write(tmp_path, name, b"")
+        with pytest.raises(DataFileError) as e:
+            open_log(log)
+        assert str(e.value) == f"{log}: the file is empty (expected {kind})"
+
+
+# -- the Rerun recording -----------------------------------------------------------------------------
+
+
+def test_replay_records_to_the_callers_recorder_and_closes_it(tmp_path: Path) -> None:
+    """The caller's recorder gets every accepted sample and every output, and is closed (its buffers sent)."""
+    from mavins.record.recorder import Recorder
+
+    log = write(tmp_path, "rest.tlog", rest_records(100))
+    rec_ = Recorder(tmp_path / "mine.rrd", live=False)
+    res = replay.replay(log, EngineConfig(**AT_REST), IngestConfig(), None, recorder=rec_)
+    assert rec_.rows["/imu/gyro"] == 100 and rec_.rows["/imu/accel"] == 100
+    assert rec_.rows["/plots/attitude"] == res.outputs >= 4
+    assert (tmp_path / "mine.rrd").stat().st_size > 0
+
+
+def test_replay_writes_the_rerun_file_only_on_success(tmp_path: Path) -> None:
+    """--rerun: the recording is renamed into place after a good replay; a log without IMU leaves nothing."""
+    log = write(tmp_path, "rest.tlog", rest_records(100))
+    rrd, out = tmp_path / "nav.rrd", tmp_path / "nav.csv"
+    res = replay.replay(log, EngineConfig(**AT_REST), IngestConfig(), out, rerun=rrd)
+    recording = rrd.read_bytes()
+    assert recording[:3] == b"RRF" and len(out.read_text().splitlines()) == 1 + res.outputs
+    assert b"mavins-replay" in recording  # the application id the viewer shows
+    bad = write(tmp_path, "hb.tlog", rec(1, v1_heartbeat()))
+    with pytest.raises(DataFileError, match="found none among 1 messages"):
+        replay.replay(bad, EngineConfig(**AT_REST), IngestConfig(), tmp_path / "b.csv", rerun=tmp_path / "b.rrd")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["hb.tlog", "nav.csv", "nav.rrd", "rest.tlog"]
+
+
+# -- where the tlog reader looks for the next record -------------------------------------------------
+
+
+def test_next_record_takes_the_first_of_several_markers_from_eight_bytes_on() -> None:
+    """The nearest FE wins over a later one; a marker exactly at start + 8 starts a record at ``start``."""
+    assert replay._next_record(bytes(12) + b"\xfe" + bytes(10) + b"\xfe" + bytes(20), 1) == 4
+    assert replay._next_record(bytes(9) + b"\xfe" + bytes(10), 1) == 1
+    assert replay._next_record(bytes(9) + b"\xfd" + bytes(10), 1) == 1
+
+
+def test_tlog_one_junk_byte_between_records(tmp_path: Path) -> None:
+    """One byte of junk: the next record starts one byte on (its marker 9 bytes after the junk), nothing else lost."""
+    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    a, b, c = (rec(i, imu_frame(mav, i)) for i in (1, 2, 3))
+    msgs, report = read_all(write(tmp_path, "a.tlog", a + b"\x01" + b + c))
+    assert [(m.get_type(), getattr(m, "time_usec", None)) for _, m in msgs] == [
+        ("HIGHRES_IMU", 1), ("BAD_DATA", None), ("HIGHRES_IMU", 2), ("HIGHRES_IMU", 3)]
+    assert report.skipped == [[len(a), 1, None]]
+
+
+def test_tlog_marker_inside_the_time_bytes_of_junk_is_not_a_record(tmp_path: Path) -> None:
+    """Junk whose 8th byte is FD: a record there would start before the junk, so the search goes past it."""
+    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    a, b = rec(1, imu_frame(mav, 1)), rec(2, imu_frame(mav, 2))
+    junk = b"\x01" * 7 + b"\xfd" + b"\x01" * 12
+    msgs, report = read_all(write(tmp_path, "a.tlog", a + junk + b))
+    assert types(msgs) == ["HIGHRES_IMU", "BAD_DATA", "HIGHRES_IMU"]
+    assert report.skipped == [[len(a), 20, None]] and bytes(msgs[1][1].data) == junk
+
+
+def test_tlog_junk_to_the_end_of_the_first_chunk_keeps_eight_bytes_for_a_record(tmp_path: Path) -> None:
+    """Junk with no marker up to a record whose time starts 4 bytes before the 1 MiB read boundary: the record's
+    time bytes are not skipped with the junk (the reader keeps 8 bytes until it has read on)."""
+    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    junk = b"\x01" * ((1 << 20) - 4)
+    a, b = rec(1, imu_frame(mav, 1)), rec(2, imu_frame(mav, 2))
+    msgs, report = read_all(write(tmp_path, "a.tlog", junk + a + b))
+    assert report.skipped == [[0, len(junk), None]] and report.cut_at is None
+    assert [m.time_usec for _, m in msgs if m.get_type() == "HIGHRES_IMU"] == [1, 2]
+
+
+def test_read_tracker_counts_its_first_read_as_progress_and_reads_at_the_end_as_none(tmp_path: Path) -> None:
+    """A first read of 1 byte is progress (20 revisits allowed after it); empty reads at the end get no further."""
+    f = write(tmp_path, "f.bin", bytes(range(4)))
+    with open(f, "rb") as fh:
+        tr = replay._ReadTracker(fh)
+        assert tr.read(0) == b"" and tr.last == (0, 0, 0)
+        assert tr.read(1) == b"\x00"
+        for _ in range(20):
+            tr.seek(0)
+            tr.read(1)
+        with pytest.raises(replay._Stuck):
+            tr.seek(0)
+            tr.read(1)
+    with open(f, "rb") as fh:
+        tr = replay._ReadTracker(fh)
+        assert tr.read() == bytes(range(4))
+        for _ in range(20):
+            assert tr.read(3) == b""
+        assert tr.header_at == 4 and tr.last == (4, 3, 0)
+        with pytest.raises(replay._Stuck, match="near byte 4 "):
+            tr.read(3)
+
+
+def test_ulog_larger_than_the_memory_is_refused_before_reading(tmp_path: Path) -> None:
+    """A (sparse) 1 TiB ULog would need about twice its size in memory: 2048.0 GiB, refused up front."""
+    from mavins.files import ResourceError
+
+    log = tmp_path / "huge.ulg"
+    with open(log, "wb") as fh:
+        fh.write(ULOG_HEADER)
+        fh.truncate(1 << 40)
+    with pytest.raises(ResourceError) as e:
+        open_log(log)
+    msg = str(e.value)
+    assert msg.startswith(f"reading {log} needs about 2048.0 GiB of memory, the machine has ") and msg.endswith(
+        " available")
+
+
+def test_log_that_cannot_be_read_is_refused_with_the_reason(tmp_path: Path) -> None:
+    """A .tlog that is a link to /proc/self/mem: a file, but reading its first bytes fails (EIO)."""
+    log = tmp_path / "mem.tlog"
+    log.symlink_to("/proc/self/mem")
+    with pytest.raises(DataFileError) as e:
+        open_log(log)
+    assert str(e.value) == f"{log}: cannot read: Input/output error"
+
+
+def test_only_the_first_64_bytes_say_what_a_file_is(tmp_path: Path) -> None:
+    """64 printable bytes then binary: a text file by its start (the sniffed head is 64 bytes)."""
+    log = write(tmp_path, "t.ulg", b"x" * 64 + b"\xff\x00" * 8)
+    with pytest.raises(DataFileError) as e:
+        open_log(log)
+    assert str(e.value) == f"{log}: expected a PX4 ULog (.ulg), found a text file"
+
+
+def test_tlog_bad_data_carries_its_reason_and_at_most_64_bytes(tmp_path: Path) -> None:
+    """Junk: 'not a tlog record' with its first 64 bytes; a bad CRC: pymavlink's reason with the frame's first 64."""
+    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    a = rec(1, imu_frame(mav, 1))
+    junk = bytes(range(1, 101))
+    bad = bytearray(rec(2, imu_frame(mav, 2)))
+    bad[-1] ^= 0xFF
+    msgs, _ = read_all(write(tmp_path, "a.tlog", a + junk + bytes(bad) + a))
+    assert types(msgs) == ["HIGHRES_IMU", "BAD_DATA", "BAD_DATA", "HIGHRES_IMU"]
+    j, c = msgs[1][1], msgs[2][1]
+    assert (bytes(j.data), j.reason) == (junk[:64], "not a tlog record")
+    assert len(bad) - 8 == 12 + 63 and bytes(c.data) == bytes(bad[8:72])
+    assert c.reason.startswith("invalid MAVLink CRC in msgID 105 ")
+
+
+def test_replay_progress_on_a_terminal(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """On a terminal (a pty here) the bar shows the fraction read every 2000 messages and 100 % after the last
+    message, then the time taken."""
+    import os
+    import re
+    import sys
+
+    log = write(tmp_path, "p.tlog", rest_records(4000, step_us=1000))  # 4000 records of one size: 2000 is half
+    master, slave = os.openpty()
+    with open(slave, "w", encoding="utf-8") as tty:
+        monkeypatch.setattr(sys, "stderr", tty)
+        res = run(log, **AT_REST)
+        tty.flush()
+        shown = os.read(master, 1 << 16).decode()
+    os.close(master)
+    assert res.messages == 4000
+    bars = re.findall(r"\rreplay p\.tlog \[(#*) *\] +([0-9.]+)% eta +[0-9.]+ s", shown)
+    assert bars == [("#" * 15, "50.0"), ("#" * 30, "100.0"), ("#" * 30, "100.0")]  # messages 2000, 4000; the end
+    assert re.search(r"\rreplay p\.tlog done in [0-9]+\.[0-9] s {40}\r?\n$", shown)
+
+
+def test_no_imu_with_an_upper_case_suffix(tmp_path: Path) -> None:
+    """The kind named in the message comes from the suffix in any case."""
+    log = write(tmp_path, "J.TLOG", bytes(range(1, 40)))
+    assert no_imu(log) == f"{log}: expected a MAVLink telemetry log (.tlog), found no valid MAVLink message in 39 bytes"
+    log = write(tmp_path, "F.BIN", FMT_OF_FMT)
+    assert no_imu(log) == (f"{log}: expected an ArduPilot DataFlash log (.bin) with {ANY_IMU}, found no IMU record in "
+                           f"{FMT_LEN} bytes")
