@@ -1323,6 +1323,7 @@ def test_replay_writes_the_rerun_file_only_on_success(tmp_path: Path) -> None:
     recording = rrd.read_bytes()
     assert recording[:3] == b"RRF" and len(out.read_text().splitlines()) == 1 + res.outputs
     assert b"mavins-replay" in recording  # the application id the viewer shows
+    assert b"wall_time" not in recording  # not live: the sensor time is the only timeline
     bad = write(tmp_path, "hb.tlog", rec(1, v1_heartbeat()))
     with pytest.raises(DataFileError, match="found none among 1 messages"):
         replay.replay(bad, EngineConfig(**AT_REST), IngestConfig(), tmp_path / "b.csv", rerun=tmp_path / "b.rrd")
@@ -1468,3 +1469,12 @@ def test_no_imu_with_an_upper_case_suffix(tmp_path: Path) -> None:
     log = write(tmp_path, "F.BIN", FMT_OF_FMT)
     assert no_imu(log) == (f"{log}: expected an ArduPilot DataFlash log (.bin) with {ANY_IMU}, found no IMU record in "
                            f"{FMT_LEN} bytes")
+
+
+def test_replay_with_a_bad_setting_raises_its_error_and_writes_nothing(tmp_path: Path) -> None:
+    """An engine setting the pipeline refuses is raised as it is (nothing to close), and no CSV is left."""
+    log = write(tmp_path, "rest.tlog", rest_records(10))
+    with pytest.raises(ValueError) as e:
+        replay.replay(log, EngineConfig(**AT_REST, frame="bogus"), IngestConfig(), tmp_path / "o.csv")
+    assert str(e.value) == "frame must be one of geographic, wander, free, inertial, got 'bogus'"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rest.tlog"]
