@@ -28,6 +28,10 @@ class BuildKernels(build_ext):
         self._outputs: list[str] = []
 
     def run(self) -> None:
+        if not aot.can_build():
+            print("mavins: no working C compiler (or no numba.pycc): the kernels are not built ahead of time "
+                  "and compile on first use instead", file=sys.stderr)
+            return
         in_place = self.inplace or getattr(self, "editable_mode", False)
         outputs = {p: None if in_place else Path(self.build_lib).joinpath(*p.split(".")) for p in aot.PACKAGES}
         for out in outputs.values():

@@ -24,6 +24,9 @@ from support import ENV, mavins
 from mavins.core import aot
 
 HERE = Path(__file__).resolve().parent
+pytestmark = pytest.mark.skipif(not aot.can_build(), reason="no working C compiler here (or a numba without "
+                                "numba.pycc): the install could not build the kernels; tests/test_cold_start.py "
+                                "covers the path every kernel then takes (the JIT)")
 
 
 def _exports() -> list[tuple[str, aot.Export]]:

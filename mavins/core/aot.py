@@ -180,6 +180,20 @@ def build(package: str, output_dir: Path | None = None) -> Path:
     return built
 
 
+def can_build() -> bool:
+    """Whether this machine can build the modules: numba still ships ``numba.pycc`` and a C
+    compiler works (numba's own check: it compiles an empty C program)."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            from numba.pycc.platform import external_compiler_works
+        except ImportError:
+            return False
+    return bool(external_compiler_works())
+
+
 def is_built(package: str) -> bool:
     """Whether ``package``'s module for its current source exists (loaded or not)."""
     return importlib.util.find_spec(f"{package}.{module_name(package)}") is not None
@@ -215,6 +229,10 @@ def main(argv: list[str] | None = None) -> int:
         packages = [p for p in packages if not is_built(p)]
     if not packages:
         return 0
+    if not can_build():
+        print("mavins: no working C compiler (or no numba.pycc): the kernels compile on first use instead",
+              file=sys.stderr)
+        return 0 if "--if-missing" in args else 1
     print(f"mavins: building the kernels of {', '.join(packages)} ahead of time (about a minute)",
           file=sys.stderr, flush=True)
     failed = 0
