@@ -34,6 +34,7 @@ from . import files
 from .core.records import Solution
 from .engine import EngineConfig
 from .files import FOUND, DataFileError, SolutionWriter, sniff
+from .imuset import DISCOVERY_S
 from .link.ingest import HIGHRES_ACC_GYRO, HIGHRES_MAG, IMU_MESSAGES, IngestConfig
 from .link.mavlink import mavlink
 from .pipeline import GNSS_MESSAGES, Pipeline
@@ -799,6 +800,8 @@ def _no_imu(path: Path, report: LogReport, cfg: IngestConfig, pipeline: Pipeline
         want += f" with id {cfg.imu_id}"
     if cfg.target_system is not None:
         want += f" from system {cfg.target_system}"
+    if cfg.imus:
+        want += f" of IMU {', '.join(map(str, cfg.imus))} (--imus)"
     types: Counter = Counter()
     imus: Counter = Counter()
     try:
@@ -815,8 +818,18 @@ def _no_imu(path: Path, report: LogReport, cfg: IngestConfig, pipeline: Pipeline
         pass
     size = f"{report.size} bytes"
     if imus:
-        rejected = pipeline.ingest.rejected
+        rejected = Counter(pipeline.ingest.rejected)
+        chosen = pipeline.imuset
+        if chosen is not None and chosen.counters["other_imu"]:
+            rejected["other_imu"] += chosen.counters["other_imu"]
+        if chosen is not None and not chosen.fixed and chosen.first_t is not None:
+            return (f"{path}: expected {want}, found only {_counts(imus, 3)} within the first "
+                    f"{DISCOVERY_S:g} s of sensor time, where --imus all looks for the streams before it fuses them")
         why = f" (rejected: {_counts(rejected)})" if rejected else ""
+        missing = [k for k in chosen.order if k not in {i for _, i in chosen.ingests}] \
+            if chosen is not None and chosen.fixed else []
+        if missing:  # a set is fused once each of its IMUs has sent a sample
+            why += f"; no sample of IMU {', '.join(map(str, missing))}, and the set is fused once each has sent one"
         return f"{path}: expected {want}, found only {_counts(imus, 3)}{why}"
     if types:
         return f"{path}: expected {want}, found none among {sum(types.values())} messages ({_counts(types)})"

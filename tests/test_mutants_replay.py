@@ -1075,6 +1075,21 @@ def test_no_imu_names_the_imu_streams_that_were_not_chosen(tmp_path: Path) -> No
     assert got.endswith(" (rejected: 7 other_imu)")
 
 
+def test_no_imu_with_imus_names_the_set_and_why_it_never_fused(tmp_path: Path) -> None:
+    """--imus: the IMU numbers asked for, the samples of other IMUs, an IMU of the set that never sent
+    one, and a log shorter than the window in which --imus all looks for the streams (1 s)."""
+    log = write(tmp_path, "one.tlog", rest_records(100))  # IMU 0 only, 1.00 .. 1.99 s
+    found = "found only 100 HIGHRES_IMU id 0 from system 1"
+    fused = "and the set is fused once each has sent one"
+    assert no_imu(log, IngestConfig(imus=(1,))) == (
+        f"{log}: expected {ANY_IMU} of IMU 1 (--imus), {found} (rejected: 100 other_imu); no sample of IMU 1, {fused}")
+    assert no_imu(log, IngestConfig(imus=(0, 1))) == (
+        f"{log}: expected {ANY_IMU} of IMU 0, 1 (--imus), {found}; no sample of IMU 1, {fused}")
+    assert no_imu(log, IngestConfig(imus=())) == (
+        f"{log}: expected {ANY_IMU}, {found} within the first 1 s of sensor time, where --imus all looks for the "
+        "streams before it fuses them")
+
+
 def test_no_imu_in_a_ulog_whose_samples_are_all_out_of_range(tmp_path: Path) -> None:
     """sensor_combined rows beyond the 16 g accelerometer range are rejected by reason."""
     rows = [(t, 0.0, 0.0, 0.0, 0.0, 0.0, -200.0) for t in (1000, 2000)]
@@ -1478,3 +1493,15 @@ def test_replay_with_a_bad_setting_raises_its_error_and_writes_nothing(tmp_path:
         replay.replay(log, EngineConfig(**AT_REST, frame="bogus"), IngestConfig(), tmp_path / "o.csv")
     assert str(e.value) == "frame must be one of geographic, wander, free, inertial, got 'bogus'"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rest.tlog"]
+
+
+def test_tlog_fraction_read_of_junk_after_two_records(tmp_path: Path) -> None:
+    """The fraction of a BAD_DATA is where its junk starts over the size, however far into the file."""
+    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    a, b, c = (rec(i, imu_frame(mav, i)) for i in (1, 2, 3))
+    junk = b"\x01" * 20
+    size = len(a + b + junk + c)
+    msgs, report = read_all(write(tmp_path, "a.tlog", a + b + junk + c))
+    assert [(f, m.get_type()) for f, m in msgs] == [(len(a) / size, "HIGHRES_IMU"), (len(a + b) / size, "HIGHRES_IMU"),
+                                                    (len(a + b) / size, "BAD_DATA"), (1.0, "HIGHRES_IMU")]
+    assert report.skipped == [[len(a + b), 20, None]]
