@@ -1088,6 +1088,15 @@ def test_no_imu_with_imus_names_the_set_and_why_it_never_fused(tmp_path: Path) -
     assert no_imu(log, IngestConfig(imus=())) == (
         f"{log}: expected {ANY_IMU}, {found} within the first 1 s of sensor time, where --imus all looks for the "
         "streams before it fuses them")
+    assert no_imu(log, IngestConfig(imus=(0, 1, 2))) == (
+        f"{log}: expected {ANY_IMU} of IMU 0, 1, 2 (--imus), {found}; no sample of IMU 1, 2, {fused}")
+    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)  # five streams in 0.5 s: three named, two counted
+    five = write(tmp_path, "five.tlog", b"".join(rest_imu(mav, 1_000_000 + k * 10_000, imu_id=k % 5)
+                                               for k in range(50)))
+    assert no_imu(five, IngestConfig(imus=())) == (
+        f"{five}: expected {ANY_IMU}, found only 10 HIGHRES_IMU id 0 from system 1, 10 HIGHRES_IMU id 1 from system 1, "
+        "10 HIGHRES_IMU id 2 from system 1 and 2 more types within the first 1 s of sensor time, where --imus all "
+        "looks for the streams before it fuses them")
 
 
 def test_no_imu_in_a_ulog_whose_samples_are_all_out_of_range(tmp_path: Path) -> None:
@@ -1337,7 +1346,9 @@ def test_replay_writes_the_rerun_file_only_on_success(tmp_path: Path) -> None:
     res = replay.replay(log, EngineConfig(**AT_REST), IngestConfig(), out, rerun=rrd)
     recording = rrd.read_bytes()
     assert recording[:3] == b"RRF" and len(out.read_text().splitlines()) == 1 + res.outputs
-    assert b"mavins-replay" in recording  # the application id the viewer shows
+    from rerun.chunk import RrdReader
+
+    assert [r.application_id for r in RrdReader(str(rrd)).recordings()] == ["mavins-replay"]  # what the viewer shows
     assert b"wall_time" not in recording  # not live: the sensor time is the only timeline
     bad = write(tmp_path, "hb.tlog", rec(1, v1_heartbeat()))
     with pytest.raises(DataFileError, match="found none among 1 messages"):
