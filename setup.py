@@ -37,8 +37,8 @@ class BuildKernels(build_ext):
         for out in outputs.values():
             if out is not None:
                 out.mkdir(parents=True, exist_ok=True)
-        for package, line in aot.build_each(outputs).items():
-            if line.endswith((".so", ".pyd")):
+        for package, (ok, line) in aot.build_each(outputs).items():
+            if ok:
                 self._outputs.append(line)
             else:
                 print(f"mavins: kernels of {package} not built ahead of time; they compile on first use "

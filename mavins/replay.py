@@ -819,15 +819,17 @@ def _no_imu(path: Path, report: LogReport, cfg: IngestConfig, pipeline: Pipeline
     size = f"{report.size} bytes"
     if imus:
         rejected = Counter(pipeline.ingest.rejected)
+        missing: list[int] = []
         chosen = pipeline.imuset
-        if chosen is not None and chosen.counters["other_imu"]:
-            rejected["other_imu"] += chosen.counters["other_imu"]
-        if chosen is not None and not chosen.fixed and chosen.first_t is not None:
-            return (f"{path}: expected {want}, found only {_counts(imus, 3)} within the first "
-                    f"{DISCOVERY_S:g} s of sensor time, where --imus all looks for the streams before it fuses them")
+        if chosen is not None:
+            if not chosen.fixed and chosen.first_t is not None:
+                return (f"{path}: expected {want}, found only {_counts(imus, 3)} within the first {DISCOVERY_S:g} s "
+                        "of sensor time, where --imus all looks for the streams before it fuses them")
+            if chosen.counters["other_imu"]:
+                rejected["other_imu"] += chosen.counters["other_imu"]
+            seen = {k for _, k in chosen.ingests}
+            missing = [k for k in chosen.order if k not in seen] if chosen.fixed else []
         why = f" (rejected: {_counts(rejected)})" if rejected else ""
-        missing = [k for k in chosen.order if k not in {i for _, i in chosen.ingests}] \
-            if chosen is not None and chosen.fixed else []
         if missing:  # a set is fused once each of its IMUs has sent a sample
             why += f"; no sample of IMU {', '.join(map(str, missing))}, and the set is fused once each has sent one"
         return f"{path}: expected {want}, found only {_counts(imus, 3)}{why}"

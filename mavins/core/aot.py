@@ -199,10 +199,10 @@ def is_built(package: str) -> bool:
     return importlib.util.find_spec(f"{package}.{module_name(package)}") is not None
 
 
-def build_each(outputs: dict[str, Path | None]) -> dict[str, str]:
+def build_each(outputs: dict[str, Path | None]) -> dict[str, tuple[bool, str]]:
     """Build each package of ``outputs`` into its folder there (None: beside its source), each in
     a fresh interpreter and side by side (up to a minute of one core each). Returns, per package,
-    the built module's path or the last line of the error that stopped it."""
+    whether it was built and the built module's path or the last line of the error that stopped it."""
     root = CORE.parents[1]
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, (str(root), os.environ.get("PYTHONPATH"))))}
     procs = {}
@@ -215,7 +215,7 @@ def build_each(outputs: dict[str, Path | None]) -> dict[str, str]:
     for package, proc in procs.items():
         out, err = proc.communicate()
         lines = (out if proc.returncode == 0 else err).strip().splitlines() or ["(no output)"]
-        result[package] = lines[-1]
+        result[package] = (proc.returncode == 0, lines[-1])
     return result
 
 
@@ -236,8 +236,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"mavins: building the kernels of {', '.join(packages)} ahead of time (about a minute)",
           file=sys.stderr, flush=True)
     failed = 0
-    for package, line in build_each(dict.fromkeys(packages)).items():
-        ok = line.endswith(".so") or line.endswith(".pyd")
+    for package, (ok, line) in build_each(dict.fromkeys(packages)).items():
         failed += not ok
         print(f"mavins: {package}: {'built ' if ok else 'not built, compiles on first use: '}{line}", file=sys.stderr)
     return 1 if failed else 0

@@ -68,8 +68,7 @@ class _FrameBound:
         entry = self._entries.get(key)
         if entry is None:
             entry = self._entries[key] = _compiled(self.func, args, self.frame)
-        call, built = entry
-        return call(*args) if built else call(*args, self.frame)
+        return _call(entry, args, self.frame)
 
 
 def _compiled(func: Callable, args: tuple, frame: int) -> tuple[Callable, bool]:
@@ -85,15 +84,16 @@ def _compiled(func: Callable, args: tuple, frame: int) -> tuple[Callable, bool]:
     return func.compile(types + (numba.types.literal(frame),)), False
 
 
+def _call(entry: tuple[Callable, bool], args: tuple, frame: int) -> Any:
+    """Call an entry of :func:`_compiled`: a built one without the frame, the others with it."""
+    call, built = entry
+    return call(*args) if built else call(*args, frame)
+
+
 def call_for_frame(func: Callable, frame: int, *args: Any) -> Any:
-    """``func(*args, frame)`` for a batch call: through its entry point built ahead of time when
-    there is one for these argument types (found by their numba types, a few microseconds), else
-    through numba's dispatcher (which compiles or loads the overload for the literal frame)."""
-    if hasattr(func, "compile"):
-        built = aot.frame_entry(func, frame, tuple(numba.typeof(a) for a in args))
-        if built is not None:
-            return built(*args)
-    return func(*args, frame)
+    """``func(*args, frame)`` for a batch call, through :func:`_compiled` each time (the argument
+    types are looked up per call, a few microseconds; arrays may differ in layout between calls)."""
+    return _call(_compiled(func, args, frame), args, frame)
 
 
 @functools.lru_cache(maxsize=None)
