@@ -11,12 +11,14 @@ for the IMU as simulated and for what-if cases (a figure left out of the
 filter's model and of the truth together). Covariance only: no data are
 generated, no filter runs closed loop.
 
-Two set-ups:
+Set-ups:
 
 * ``mc``: bench_filter.py's Monte Carlo and tests/test_aided_filter.py (a
   ZUPT at every attitude update in the first 10 s at rest and a zero-rate
   update at its end, then 1 Hz GNSS position 1 m / 1.5 m and velocity
   0.1 m/s);
+* ``mc`` with the simulator's magnetometer (10 or 50 Hz) added: what the
+  tilt-heading coupling of its measurement leaves;
 * ``h2h``: the head-to-head with pyins (10 Hz ZUPTs in the rest window, no
   zero-rate update). ``--pyins`` adds pyins's own error model
   (python-ins 1.0.1 ``InsErrorModel``, the modified phi-angle model, with
@@ -25,7 +27,7 @@ Two set-ups:
 
 Run from the repository root::
 
-    .venv/bin/python benchmarks/heading_budget.py            # about 1 minute
+    .venv/bin/python benchmarks/heading_budget.py            # a few seconds
     .venv/bin/python benchmarks/heading_budget.py --pyins    # plus about 40 s
 """
 
@@ -46,10 +48,12 @@ for _p in (str(HERE), str(HERE.parent)):
         sys.path.insert(0, _p)
 
 import bench_filter as bf
+from sim.aiding import MagConfig
 
 from mavins.core import earth
 from mavins.core import errmodel as em
 from mavins.core import kalman as kf
+from mavins.core import strapdown as sd
 from mavins.core.rotation import quat_to_dcm, skew
 
 TIMES = (35.0, 42.0, 46.0, 60.0, 70.0, 76.0, 90.0, 110.0)
@@ -63,10 +67,22 @@ CASES: tuple[tuple[str, dict[str, float], float], ...] = (
     ("ideal gyros and accelerometer biases known",
      {"gyro_gm": 0.0, "gyro_arw": 1e-9, "gyro_rrw": 0.0, "accel_bias": 1e-9, "accel_gm": 0.0, "accel_rrw": 0.0}, 0.1),
 )
+MAG_CASES: tuple[tuple[str, dict[str, float], float], ...] = (
+    # (label, ImuSpec fields replaced, magnetometer rate Hz)
+    ("as simulated, magnetometer 10 Hz", {}, 10.0),
+    ("as simulated, magnetometer 50 Hz", {}, 50.0),
+    ("accelerometer biases known, magnetometer 10 Hz", {"accel_bias": 1e-9, "accel_gm": 0.0, "accel_rrw": 0.0}, 10.0),
+)
 
 
-def budget(spec: em.ImuSpec, setup: str, sigma_vel: float) -> np.ndarray:
-    """Rows ``t, heading 1-sigma (deg), z gyro bias 1-sigma (deg/s)`` at every attitude update."""
+def budget(spec: em.ImuSpec, setup: str, sigma_vel: float, mag_rate: float = 0.0) -> np.ndarray:
+    """Rows ``t, heading 1-sigma (deg), z gyro bias 1-sigma (deg/s)`` at every attitude update.
+
+    ``mag_rate`` > 0 adds the simulator's magnetometer (sim.aiding.MagConfig:
+    0.3 uT per axis in a 48 uT field at 63 deg inclination) from 1 s on at
+    that rate, as kalman.mag_heading with the heading noise sigma / H and the
+    considered tilt (kalman.MAG_FREE).
+    """
     t = bf.taf()
     ex = bf.trajectory().exact
     truth = ex.truth
@@ -82,6 +98,10 @@ def budget(spec: em.ImuSpec, setup: str, sigma_vel: float) -> np.ndarray:
     h_vel = np.zeros((3, em.NX))
     h_vel[:, em.X_DV:em.X_DV + 3] = np.eye(3)
     zero3 = np.zeros(3)
+    mag = MagConfig()
+    sig_mag = mag.sigma / (mag.strength * math.cos(math.radians(mag.inclination)))
+    r_mag = np.array([[sig_mag ** 2]])
+    s_true = np.zeros(sd.S_SIZE)
     out = []
     for k in range(1, ex.t.size // 2 + 1):
         i = 2 * k  # truth row after samples 2k-1 and 2k
@@ -108,6 +128,10 @@ def budget(spec: em.ImuSpec, setup: str, sigma_vel: float) -> np.ndarray:
         if tk >= 1.0 - 1e-9 and abs(tk * g.rate - round(tk * g.rate)) < 1e-6:
             kf.update(x, P, h_pos, zero3, r_pos, 0.0, kf.ALL)
             kf.update(x, P, h_vel, zero3, np.eye(3) * sigma_vel ** 2, 0.0, kf.ALL)
+        if mag_rate > 0.0 and tk >= 1.0 - 1e-9 and abs(tk * mag_rate - round(tk * mag_rate)) < 1e-6:
+            s_true[sd.S_C:sd.S_C + 9] = c.ravel()
+            _, h_mag, _ = kf.mag_heading(s_true, c.T @ mag.field_n(), zero3, 0.0, 0.0, sig_mag)
+            kf.update(x, P, h_mag, np.zeros(1), r_mag, 0.0, kf.MAG_FREE)
         bz = P[em.X_BG + 2, em.X_BG + 2] + P[em.X_GG + 2, em.X_GG + 2] + 2.0 * P[em.X_BG + 2, em.X_GG + 2]
         out.append((tk, math.degrees(math.sqrt(P[em.X_PHI + 2, em.X_PHI + 2])), math.degrees(math.sqrt(bz))))
     return np.array(out)
@@ -174,6 +198,9 @@ def main() -> None:
     print("set-up mc (rest window with ZUPT and ZARU, as the Monte Carlo and the tests):")
     for label, repl, sv in CASES:
         print("  " + summary(label, budget(dataclasses.replace(base, **repl), "mc", sv)))
+    print("set-up mc with the simulator's magnetometer (GNSS velocity 0.1 m/s):")
+    for label, repl, rate in MAG_CASES:
+        print("  " + summary(label, budget(dataclasses.replace(base, **repl), "mc", 0.1, rate)))
     print("set-up h2h (10 Hz ZUPT at rest, no ZARU, as the pyins comparison):")
     print("  " + summary("mavins's model (phi-angle)", budget(base, "h2h", 0.1)))
     if args.pyins:

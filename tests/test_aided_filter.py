@@ -22,7 +22,9 @@ initial errors):
 * GNSS 1 Hz, 1 m horizontal, 1.5 m vertical, 0.1 m/s velocity;
 * initial errors drawn from the filter's initial covariance: 3 m, 0.3 m/s,
   0.05 deg level, 3 deg yaw; the first 10 s at rest are used for ZUPT and
-  ZARU.
+  ZARU;
+* a second set-up adds the simulator's magnetometer (10 Hz, 0.3 uT per
+  axis, calibrated) and is held to the same bands.
 
 Why the small initial level sigma and the rest period: the consumer part's
 turn-on biases (8 mg, 0.33 deg/s, 1-sigma) are large. A level error that the
@@ -166,16 +168,27 @@ BIAS_SUM[3:6, em.X_BA : em.X_BA + 3] = np.eye(3)
 BIAS_SUM[3:6, em.X_GA : em.X_GA + 3] = np.eye(3)
 
 
-@pytest.fixture(scope="module")
-def monte_carlo(trajectory):
+MAG = aiding.MagConfig()  # 10 Hz (the live path's magnetometer rate), 0.3 uT, calibrated
+MAG_SIGMA_YAW = MAG.sigma / (MAG.strength * math.cos(math.radians(MAG.inclination)))  # rad per sample
+
+
+def magnetometer_rows(trajectory, seed: int, rate: float = MAG.rate) -> np.ndarray:
+    """The simulator's magnetometer (at ``rate`` Hz) for run ``seed`` with the heading sigma column (deg) aided.py
+    reads."""
+    mag = aiding.magnetometer(dataclasses.replace(trajectory, seed=seed), dataclasses.replace(MAG, rate=rate))
+    return np.column_stack([mag, np.full(mag.shape[0], math.degrees(MAG_SIGMA_YAW))])
+
+
+def run_monte_carlo(trajectory, with_mag: bool) -> dict:
     """N runs: NEES per epoch (1 Hz) per block, errors, final bias NEES and z, NIS logs."""
     truth_all = trajectory.exact.truth
     out = {"nees": {k: [] for k in ("att", "vel", "pos")}, "err": [], "t": None, "bias_nees": [], "bias_z": [],
            "nis": [], "counts": [], "fixes": 0, "P_sigma": []}
     for r in range(N_RUNS):
         imu, gnss, init, bg, ba = simulate_run(trajectory, 1000 + r)
+        kw = {"mag": magnetometer_rows(trajectory, 1000 + r), "declination": MAG.declination} if with_mag else {}
         rows, st = aided.navigate_aided(imu, init, gnss, static=STATIC, spec="consumer", file_units=False,
-                                        covariance_every=EVERY)
+                                        covariance_every=EVERY, **kw)
         idx = 2 * (np.arange(rows.shape[0]) + 1)  # row k is the update at sample 2k+1: truth row 2(k+1)
         err = nav_errors(rows, truth_all[idx])
         sel = np.arange(st["P_history"].shape[0]) * EVERY + EVERY - 1
@@ -199,27 +212,48 @@ def monte_carlo(trajectory):
     return out
 
 
+@pytest.fixture(scope="module")
+def monte_carlo(trajectory):
+    """GNSS (and the rest window) only."""
+    return run_monte_carlo(trajectory, False)
+
+
+@pytest.fixture(scope="module")
+def monte_carlo_mag(trajectory):
+    """GNSS and the simulator's magnetometer."""
+    return run_monte_carlo(trajectory, True)
+
+
+@pytest.fixture(params=["monte_carlo", "monte_carlo_mag"])
+def either_mc(request):
+    """Each Monte Carlo set-up in turn."""
+    return request.getfixturevalue(request.param)
+
+
 @pytest.mark.parametrize("block", ["pos", "vel", "att"])
-def test_monte_carlo_nees(monte_carlo, block: str) -> None:
+def test_monte_carlo_nees(either_mc, block: str) -> None:
     """ANEES (mean over runs, 3 dof, full 3x3 covariance) averaged over the 1 Hz epochs of the run.
 
     Each epoch's ANEES ~ chi2(3N)/N; the time average has the same mean and
     at most the spread of one epoch, so it lies in that band (N = 50: 2.36 .. 3.72).
     """
-    anees = np.mean(np.array(monte_carlo["nees"][block]), axis=0)
+    anees = np.mean(np.array(either_mc["nees"][block]), axis=0)
     lo, hi = band(3, N_RUNS)
     assert lo < anees.mean() < hi, (block, anees.mean(), lo, hi)
 
 
-def test_monte_carlo_accuracy(monte_carlo) -> None:
+def test_monte_carlo_accuracy(either_mc) -> None:
     """After the first 60 s: horizontal position RMS below 0.5 m, level attitude RMS below 0.1 deg.
 
-    The heading is not held to 0.1 deg: it is observable only in the turns
-    and accelerations and drifts with the z gyro's bias instability
-    (16 deg/h) in between; its consistency is part of the attitude NEES.
+    The heading is not held to 0.1 deg: without a magnetometer it is
+    observable only in the turns and accelerations and drifts with the z
+    gyro's bias instability (16 deg/h) in between; with one, the magnetometer
+    sees heading plus tan(63 deg) ~ 2 times the tilt about magnetic east,
+    whose 1-sigma is about 0.05 deg (docs/filter.md "Limits"). Its
+    consistency is part of the attitude NEES.
     """
-    late = monte_carlo["t"] >= 60.0
-    err = np.array(monte_carlo["err"])[:, late]
+    late = either_mc["t"] >= 60.0
+    err = np.array(either_mc["err"])[:, late]
     assert math.sqrt(np.mean(np.sum(err[:, :, 6:8] ** 2, axis=2))) < 0.5
     assert np.degrees(math.sqrt(np.mean(np.sum(err[:, :, 0:2] ** 2, axis=2)))) < 0.1
 
@@ -238,15 +272,15 @@ def test_monte_carlo_biases_at_the_end(monte_carlo) -> None:
     assert np.sum(z < 2.0) >= math.floor(n * p - 3.09 * math.sqrt(n * p * (1 - p)))
 
 
-def test_monte_carlo_normalised_errors(monte_carlo) -> None:
+def test_monte_carlo_normalised_errors(either_mc) -> None:
     """Every state's normalised error e / sigma has an RMS below 1.5 over runs and 1 Hz epochs
     (issue target; a consistent filter gives 1, and the RMS of 50 x 120 unit normals lies within
     1 +- 0.03). Attitude, velocity, position from the kept covariances; biases at the end."""
-    sel = np.arange(monte_carlo["P_sigma"].shape[1]) * EVERY + EVERY - 1
-    err = np.array(monte_carlo["err"])[:, sel]
-    rms = np.sqrt(np.mean((err / monte_carlo["P_sigma"]) ** 2, axis=(0, 1)))
+    sel = np.arange(either_mc["P_sigma"].shape[1]) * EVERY + EVERY - 1
+    err = np.array(either_mc["err"])[:, sel]
+    rms = np.sqrt(np.mean((err / either_mc["P_sigma"]) ** 2, axis=(0, 1)))
     assert np.all(rms < 1.5), rms
-    bias_rms = np.sqrt(np.mean(np.array(monte_carlo["bias_z"]) ** 2, axis=0))
+    bias_rms = np.sqrt(np.mean(np.array(either_mc["bias_z"]) ** 2, axis=0))
     assert np.all(bias_rms < 1.5), bias_rms
 
 
@@ -391,7 +425,7 @@ def test_zupt_zaru_and_magnetometer_at_rest(static_run) -> None:
     assert rows[-1, 31] ** 2 <= g.random_walk**2 / last + walk * last / 3.0 + walk * (rows[-1, 0] - 59.9)
     assert abs(rows[-1, 25] - bg[idx[-1], 2]) < 3.0 * rows[-1, 31]
     assert abs(err[-1, 2]) < 3.0 * rows[-1, 22]
-    _, H, _ = kf.mag_heading(st["state"], mag[-1, 1:4], math.radians(mag_cfg.declination), sig_yaw)
+    _, H, _ = kf.mag_heading(st["state"], mag[-1, 1:4], np.zeros(3), 0.0, math.radians(mag_cfg.declination), sig_yaw)
     h = H[0, 0:3]
     assert np.hypot(h[0], h[1]) == pytest.approx(math.tan(math.radians(mag_cfg.inclination)), rel=0.02)
     sig_z = math.sqrt(h @ st["P"][0:3, 0:3] @ h)
@@ -642,13 +676,73 @@ def test_measurement_models_linearise_the_measurement(which: str) -> None:
         m_b = c_true.T @ m_n
 
         def measure(s):
-            return kf.mag_heading(s, m_b, 0.05, 0.01)
+            return kf.mag_heading(s, m_b, np.zeros(3), 0.0, 0.05, 0.01)
         tol = 2e-5
     else:
         def measure(s):
             return kf.zupt(s, 0.01)
         tol = 1e-12
     measurement_jacobian_check(measure, dx, tol)
+
+
+def test_late_magnetometer_sample_is_carried_to_the_solution_time() -> None:
+    """A magnetometer sample dt old while the body turns at w is rotated to the solution's time.
+
+    Truth: ``C_b^n(t_k) = C`` and ``C_b^n(t_k - dt) = C exp(-[w dt x])``, so
+    the sample is ``exp([w dt x]) C^T m^n``. The first-order carry leaves
+    ``|dm| <= |w dt|^2 |m| / 2``, a heading residual of at most that over the
+    horizontal field; uncarried the residual is of the order of ``|w dt|``
+    (0.7 deg here).
+    """
+    m_n = 48.0 * np.array([math.cos(1.1) * math.cos(0.05), math.cos(1.1) * math.sin(0.05), math.sin(1.1)])
+    s = moving_state()
+    c = s[sd.S_C : sd.S_C + 9].reshape(3, 3)
+    w = np.array([0.15, -0.25, 0.35])
+    dt = 0.02
+    m_b = rotvec_to_dcm(w * dt) @ c.T @ m_n
+    bound = 0.5 * (np.linalg.norm(w) * dt) ** 2 * 48.0 / (48.0 * math.cos(1.1))
+    nu, _, _ = kf.mag_heading(s, m_b, w, dt, 0.05, 0.01)
+    assert abs(nu[0]) < bound
+    nu_0, _, _ = kf.mag_heading(s, m_b, w, 0.0, 0.05, 0.01)
+    assert abs(nu_0[0]) > 20.0 * bound
+    nu_now, _, _ = kf.mag_heading(s, c.T @ m_n, w, 0.0, 0.05, 0.01)
+    assert abs(nu_now[0]) < 1e-12
+
+
+def test_batch_filter_carries_a_late_magnetometer_sample(trajectory) -> None:
+    """aided.run_aided carries a sample to the update after it (kalman.mag_heading with that update's mean rate).
+
+    Ideal IMU from the true start, navigation-grade model and a 0.01 deg
+    heading sigma, so that the innovation's variance stays about R; one
+    noise-free sample half an attitude interval (0.01 s) before the update at
+    72.02 s, in the steady first turn. Carried
+    with the interval's mean rate w_m, the innovation is at most
+    ``(|w dt|^2 / 2 + |w_last - w_m| dt) / cos(I)`` (second-order term and the
+    rate's change over the interval, from the exact increments): its NIS at
+    most that squared over R. Uncarried it is the turn over 0.01 s, 3.5 mrad.
+    """
+    ex = trajectory.exact
+    t_m = 72.01
+    i = int(round(t_m / 0.01))  # truth row at t_m; the update at 72.02 ends with increment i
+    assert ex.truth[i, 0] == pytest.approx(t_m, abs=1e-9) and ex.t[i] == pytest.approx(72.02, abs=1e-9)
+    m_n = MAG.field_n()
+    m_b = quat_to_dcm(ex.truth[i, 10:14]).T @ m_n
+    sigma = 0.1  # deg
+    mag = np.array([[t_m, *m_b, sigma]])
+    init = dict(ex.init(), **dict(INIT_SIGMA, sigma_yaw=0.01))
+    _, st = aided.navigate_aided(np.column_stack([ex.t, ex.dtheta, ex.dv]), init, mag=mag,
+                                 declination=MAG.declination, spec="navigation", file_units=False)
+    dt = 0.01
+    w_last = ex.dtheta[i] / dt
+    w_mean = (ex.dtheta[i - 1] + ex.dtheta[i]) / (2 * dt)
+    cos_i = math.cos(math.radians(MAG.inclination))
+    bound = (0.5 * (np.linalg.norm(w_last) * dt) ** 2 + np.linalg.norm(w_last - w_mean) * dt) / cos_i
+    turned = np.linalg.norm(w_last) * dt
+    assert turned > 100 * bound
+    log = st["nis"][st["nis"][:, 1] == aided.K_MAG]
+    assert log.shape[0] == 1 and log[0, 0] == t_m and log[0, 4] == 1.0
+    r = math.radians(sigma) ** 2
+    assert log[0, 2] < bound**2 / r
 
 
 def test_late_fix_moves_the_solution_back_along_the_velocity() -> None:

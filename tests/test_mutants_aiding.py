@@ -654,6 +654,27 @@ def test_magnetometer_heading_by_hand() -> None:
     assert f.counters["mag_rejected"] == 1
 
 
+@pytest.mark.parametrize("late", [0.01, 0.0])
+def test_late_magnetometer_sample_is_turned_with_the_bias_corrected_rate(late) -> None:
+    """Raw yaw rate 0.1 rad/s, gyro bias 0.02 from the rest window: one update turns the yaw to psi = 0.08 * 0.01.
+    A sample of a field straight north, stamped at the start (10 ms before the update: the body then pointed
+    north, so it reads (1, 0, 0)), is carried to the update by -late (w x m_b) (kalman.mag_heading) with
+    w = 0.08: it agrees with the turned yaw to third order (psi - atan(psi) = psi^3/3 ~ 2e-10), so the yaw
+    stays. The same sample stamped at the update (late 0) is psi off, and P_yaw = R moves the yaw half way."""
+    s = state()
+    f = LiveFilter(FilterSettings(spec={}, sigma_mag=2.0))
+    f.start(s, CFG, np.array([0.0, 0.0, 0.02]), 0.01)
+    assert still(f, s, T0 + 0.01, (0.0, 0.0, 0.1)) == 1
+    psi = 0.08 * 0.01
+    assert yaw(s) == pytest.approx(psi, rel=1e-12)
+    f.P[:] = 0.0
+    f.P[2, 2] = (2.0 * DEG) ** 2
+    f.measure(s, CFG, T0 + 0.01 - late, "mag", (1.0, 0.0, 0.0))
+    assert f.counters == {"mag_accepted": 1}
+    want = psi if late else psi / 2
+    assert yaw(s) == pytest.approx(want, abs=1e-9)
+
+
 def test_zupt_by_hand() -> None:
     """v = (0.02, -0.04, 0.01) m/s, P_v = sigma_zupt^2 = 0.05^2: a ZUPT halves the velocity; ratio
     (0.04 / sqrt(0.005) / 5)^2 = 0.0128; a 10 m/s velocity is rejected by the gate."""

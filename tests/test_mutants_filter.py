@@ -764,14 +764,14 @@ def test_mag_heading_with_declination() -> None:
     inc, dec = 60.0 * DEG, 10.0 * DEG
     m_n = 48.0 * np.array([math.cos(inc) * math.cos(dec), math.cos(inc) * math.sin(dec), math.sin(inc)])
     m_b = cbn(*ATT).T @ m_n
-    nu, H, R = kf.mag_heading(s, m_b, dec - 0.05, 0.02)
+    nu, H, R = kf.mag_heading(s, m_b, np.zeros(3), 0.0, dec - 0.05, 0.02)
     assert nu[0] == pytest.approx(0.05, rel=1e-12, abs=0)
     He = np.zeros((1, 22))
     He[0, 0:3] = [-math.tan(inc) * math.cos(dec), -math.tan(inc) * math.sin(dec), 1.0]
     np.testing.assert_allclose(H, He, rtol=0, atol=1e-14)
     np.testing.assert_allclose(R, [[0.0004]], rtol=1e-15, atol=0)
     # wrapped: a declination of 10 deg against a field seen at 10 deg - 2 pi + 0.1
-    nu, _, _ = kf.mag_heading(s, m_b, dec + 2 * math.pi - 0.1, 0.02)
+    nu, _, _ = kf.mag_heading(s, m_b, np.zeros(3), 0.0, dec + 2 * math.pi - 0.1, 0.02)
     assert nu[0] == pytest.approx(0.1, rel=1e-12, abs=0)
 
 
