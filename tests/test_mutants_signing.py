@@ -267,6 +267,13 @@ def test_an_unreadable_state_file_starts_from_the_clock(tmp_path: Path, text: st
     assert s.next_timestamp() >= now_units() - UNITS
 
 
+def test_the_default_link_id_is_0() -> None:
+    s = Signer(KEY, None)
+    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=191)
+    s.attach(mav)
+    assert bytes(s.pack(mav.heartbeat_encode(18, 8, 0, 0, 0), mav))[-13] == 0
+
+
 def test_a_state_path_that_is_not_a_file_is_not_read(tmp_path: Path) -> None:
     s = Signer(KEY, tmp_path / "absent")
     assert s.last == 0 and s.reserved == 0
