@@ -685,30 +685,6 @@ def test_measurement_models_linearise_the_measurement(which: str) -> None:
     measurement_jacobian_check(measure, dx, tol)
 
 
-def test_late_magnetometer_sample_is_carried_to_the_solution_time() -> None:
-    """A magnetometer sample dt old while the body turns at w is rotated to the solution's time.
-
-    Truth: ``C_b^n(t_k) = C`` and ``C_b^n(t_k - dt) = C exp(-[w dt x])``, so
-    the sample is ``exp([w dt x]) C^T m^n``. The first-order carry leaves
-    ``|dm| <= |w dt|^2 |m| / 2``, a heading residual of at most that over the
-    horizontal field; uncarried the residual is of the order of ``|w dt|``
-    (0.7 deg here).
-    """
-    m_n = 48.0 * np.array([math.cos(1.1) * math.cos(0.05), math.cos(1.1) * math.sin(0.05), math.sin(1.1)])
-    s = moving_state()
-    c = s[sd.S_C : sd.S_C + 9].reshape(3, 3)
-    w = np.array([0.15, -0.25, 0.35])
-    dt = 0.02
-    m_b = rotvec_to_dcm(w * dt) @ c.T @ m_n
-    bound = 0.5 * (np.linalg.norm(w) * dt) ** 2 * 48.0 / (48.0 * math.cos(1.1))
-    nu, _, _ = kf.mag_heading(s, m_b, w, dt, 0.05, 0.01)
-    assert abs(nu[0]) < bound
-    nu_0, _, _ = kf.mag_heading(s, m_b, w, 0.0, 0.05, 0.01)
-    assert abs(nu_0[0]) > 20.0 * bound
-    nu_now, _, _ = kf.mag_heading(s, c.T @ m_n, w, 0.0, 0.05, 0.01)
-    assert abs(nu_now[0]) < 1e-12
-
-
 def test_batch_filter_carries_a_late_magnetometer_sample(trajectory) -> None:
     """aided.run_aided carries a sample to the update after it (kalman.mag_heading with that update's mean rate).
 

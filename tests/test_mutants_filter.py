@@ -775,6 +775,29 @@ def test_mag_heading_with_declination() -> None:
     assert nu[0] == pytest.approx(0.1, rel=1e-12, abs=0)
 
 
+def test_mag_heading_carries_a_late_sample_to_the_solution_time() -> None:
+    """A sample dt old while the body turns at w (body axes): truth ``C_b^n(t_k) = C`` and
+    ``C_b^n(t_k - dt) = C exp(-[w dt x])``, so the sample is ``exp([w dt x]) C^T m^n``. Carried by
+    ``-dt (w x m_b)``, the innovation is at most the first-order carry's error ``|w dt|^2 |m| / 2`` over
+    the horizontal field; uncarried it is of the order of ``|w dt|`` (0.7 deg here). Each rate component
+    matters (the attitude is tilted)."""
+    s = state()
+    inc, dec = 60.0 * DEG, 10.0 * DEG
+    m_n = 48.0 * np.array([math.cos(inc) * math.cos(dec), math.cos(inc) * math.sin(dec), math.sin(inc)])
+    c = cbn(*ATT)
+    dt = 0.02
+    bound_of = lambda w: 0.5 * (np.linalg.norm(w) * dt) ** 2 / math.cos(inc)  # noqa: E731
+    for w in (np.array([0.15, -0.25, 0.35]), np.array([0.4, 0.0, 0.0]), np.array([0.0, -0.4, 0.0]),
+              np.array([0.0, 0.0, 0.4])):
+        m_b = rodrigues(w * dt) @ c.T @ m_n
+        nu, _, _ = kf.mag_heading(s, m_b, w, dt, dec, 0.02)
+        assert abs(nu[0]) < bound_of(w), w
+        nu_0, _, _ = kf.mag_heading(s, m_b, w, 0.0, dec, 0.02)
+        assert abs(nu_0[0]) > 20.0 * bound_of(w), w
+    nu, _, _ = kf.mag_heading(s, c.T @ m_n, np.array([0.15, -0.25, 0.35]), 0.0, dec, 0.02)
+    assert abs(nu[0]) < 1e-12
+
+
 def test_zupt() -> None:
     s = state()
     nu, H, R = kf.zupt(s, 0.02)
