@@ -248,7 +248,7 @@ def test_monte_carlo_accuracy(either_mc) -> None:
     The heading is not held to 0.1 deg: without a magnetometer it is
     observable only in the turns and accelerations and drifts with the z
     gyro's bias instability (16 deg/h) in between; with one, the magnetometer
-    sees heading plus tan(63 deg) ~ 2 times the tilt about magnetic east,
+    sees heading plus tan(63 deg) ~ 2 times the tilt about magnetic north,
     whose 1-sigma is about 0.05 deg (docs/filter.md "Limits"). Its
     consistency is part of the attitude NEES.
     """
@@ -397,7 +397,7 @@ def test_zupt_zaru_and_magnetometer_at_rest(static_run) -> None:
     that of the last ZARU plus the walk since. The magnetometer (0.3 uT on
     a 21.8 uT horizontal field: 0.79 deg per sample, 10 Hz) brings the
     heading within 3 sigma; what it measures, heading plus tan(inclination)
-    times the tilt about the magnetic east axis, ends within 3 sigma with
+    times the tilt about the magnetic north axis, ends within 3 sigma with
     sigma below three times that of the mean of the 600 samples. Velocity
     stays within 3 sigma throughout.
     """

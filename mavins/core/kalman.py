@@ -63,7 +63,7 @@ from .rotation import mat3_mul_s, mat_vec, quat_mul_s, quat_to_dcm_s, rotvec_to_
 
 ALL = np.ones(NX)  # update(): every state may be corrected
 # A magnetometer heading corrects the heading and the gyro biases only: its tilt
-# terms (tan(I) times the tilt about magnetic east) stay in H, so the tilt's
+# terms (tan(I) times the tilt about magnetic north) stay in H, so the tilt's
 # uncertainty counts, but the tilt and the accelerometer biases are "considered",
 # not corrected. Corrected, the magnetometer moved the tilt along the direction
 # zero-velocity updates cannot see (tilt against accelerometer bias): at rest
