@@ -152,10 +152,15 @@ def _add_nav(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--jobs", type=_positive_int(1, 1024), default=None, metavar="N",
                    help="with --each: worker processes (default: every core)")
     _strapdown_options(p)
-    g = p.add_argument_group("aided navigation (with --gnss and/or --baro; docs/filter.md)")
+    g = p.add_argument_group("aided navigation (with --gnss, --baro and/or --mag; docs/filter.md)")
     g.add_argument("--gnss", type=Path, metavar="GNSS.csv",
                    help="GNSS fixes: t,lat,lon,h [,sigma_h,sigma_v,vn,ve,vd,sigma_vel] (docs/conventions.md)")
     g.add_argument("--baro", type=Path, metavar="BARO.csv", help="barometric height: t,h [,sigma]")
+    g.add_argument("--mag", type=Path, metavar="MAG.csv",
+                   help="calibrated magnetometer, body FRD, any unit: t,mx,my,mz [,sigma] (sigma: heading noise of "
+                        "one sample, deg, default 3)")
+    g.add_argument("--declination", type=_real(-180.0, 180.0), default=0.0, metavar="DEG",
+                   help="magnetic declination for --mag (east positive)")
     _filter_options(g, with_aiding=False)
     p.add_argument("--timing", action="store_true", help="print read/compute/write seconds to stderr")
     r = p.add_argument_group("redundant IMUs (several IMU files; noise from --grade/--imu-spec; docs/redundancy.md)")
@@ -309,12 +314,13 @@ def _cmd_nav(args: argparse.Namespace) -> int:
     try:
         if len(args.imu) > 1 or args.fdi_log is not None:
             return _cmd_nav_fdi(args, opts)
-        if args.gnss is None and args.baro is None:
+        if args.gnss is None and args.baro is None and args.mag is None:
             rows = run_nav(args.imu[0], args.init, args.output, opts)
         else:
-            from .nav import run_nav_aided
+            from .nav import AidingFiles, run_nav_aided
 
-            rows, counts = run_nav_aided(args.imu[0], args.init, args.output, opts, args.gnss, args.baro,
+            rows, counts = run_nav_aided(args.imu[0], args.init, args.output, opts,
+                                         AidingFiles(args.gnss, args.baro, args.mag, args.declination),
                                          _imu_spec(args), args.lever_arm, args.gate)
             for kind, (ok, bad) in counts.items():
                 if ok or bad:
@@ -332,8 +338,8 @@ def _cmd_nav_each(args: argparse.Namespace, opts: object) -> int:
     from . import files
     from .nav import run_nav_batch
 
-    bad = [name for name, v in (("--gnss", args.gnss), ("--baro", args.baro), ("--fdi-log", args.fdi_log))
-           if v is not None]
+    bad = [name for name, v in (("--gnss", args.gnss), ("--baro", args.baro), ("--mag", args.mag),
+                                ("--fdi-log", args.fdi_log)) if v is not None]
     if bad:
         print(f"mavins nav: error: --each navigates free inertial; {', '.join(bad)} cannot go with it",
               file=sys.stderr)
@@ -360,8 +366,8 @@ def _cmd_nav_fdi(args: argparse.Namespace, opts: object) -> int:
     from .fdi import run_nav_fdi, strapdown_keywords
 
     try:
-        if args.gnss is not None or args.baro is not None:
-            raise ValueError("several IMU files with --gnss/--baro are not supported (the fused solution is "
+        if args.gnss is not None or args.baro is not None or args.mag is not None:
+            raise ValueError("several IMU files with --gnss/--baro/--mag are not supported (the fused solution is "
                              "free inertial)")
         rows, events = run_nav_fdi(args.imu, args.init, args.output, args.fdi_log, rates=args.input == "rates",
                                    strapdown=strapdown_keywords(opts), spec=_imu_spec(args),
@@ -418,6 +424,9 @@ def _add_sim(sub: argparse._SubParsersAction) -> None:
                    help="GNSS fixes per second written to gnss.csv (with baro.csv; 0 = none; docs/simulator.md)")
     p.add_argument("--gnss-outage", type=_Outage(), metavar="START,END",
                    help="no GNSS fix between these sensor times (s), in files and when streaming")
+    p.add_argument("--mag-rate", type=_real(0.0, 100.0), default=0.0, metavar="HZ",
+                   help="magnetometer samples per second written to mag.csv (0 = none; 48 uT field, declination "
+                        "2 deg, inclination 63 deg, 0.3 uT noise; docs/simulator.md)")
     p.add_argument("--imus", type=_positive_int(1, 3), default=1, metavar="N",
                    help="IMUs (1..3): extras written as imu1.csv, imu2.csv, streamed as HIGHRES_IMU id 1, 2 "
                         "(with --msg raw as SCALED_IMU2/3); scenario [[faults]] name them (docs/redundancy.md)")
@@ -446,11 +455,14 @@ def _cmd_sim(args: argparse.Namespace) -> int:
         run = generate(scenario, duration=args.duration, rate=args.rate, seed=args.seed, grade=args.grade,
                        usec_grid=args.stream is not None, imus=args.imus)
         if args.output is not None:
-            from sim.aiding import GnssConfig, simulate_aiding
+            from sim.aiding import BaroConfig, GnssConfig, MagConfig, simulate_aiding
 
             outages = (tuple(args.gnss_outage),) if args.gnss_outage else ()
-            aiding = simulate_aiding(run, GnssConfig(rate=args.gnss_rate, outages=outages)) \
-                if args.gnss_rate > 0 else None
+            gnss_on = args.gnss_rate > 0
+            aiding = simulate_aiding(run, GnssConfig(rate=args.gnss_rate, outages=outages) if gnss_on else None,
+                                     BaroConfig() if gnss_on else None,
+                                     MagConfig(rate=args.mag_rate) if args.mag_rate > 0 else None) \
+                if gnss_on or args.mag_rate > 0 else None
             paths = write(run, args.output, aiding)
     except (ValueError, OSError) as exc:  # ScenarioError, DataFileError and ResourceError are ValueErrors
         text = f"{exc.filename}: {exc.strerror}" if isinstance(exc, OSError) and exc.filename else str(exc)

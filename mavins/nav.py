@@ -124,6 +124,18 @@ GNSS_REQUIRED = ("t", "lat", "lon", "h")
 GNSS_OPTIONAL = ("vn", "ve", "vd", "sigma_h", "sigma_v", "sigma_vel")
 BARO_REQUIRED = ("t", "h")
 BARO_OPTIONAL = ("sigma",)
+MAG_REQUIRED = ("t", "mx", "my", "mz")
+MAG_OPTIONAL = ("sigma",)
+
+
+@dataclass(frozen=True)
+class AidingFiles:
+    """The aiding files of ``mavins nav`` (None = not given) and the magnetic declination (deg, east positive)."""
+
+    gnss: Path | None = None
+    baro: Path | None = None
+    mag: Path | None = None
+    declination: float = 0.0
 
 
 def read_aiding(path: Path, required: tuple[str, ...], optional: tuple[str, ...],
@@ -187,10 +199,9 @@ def _aiding_rows(path: Path, header: list[str], cols: tuple[str, ...], may_be_em
     return np.array(rows, dtype=float).reshape(len(rows), len(cols))
 
 
-def run_nav_aided(imu_path: Path, init_path: Path, out_path: Path, opts: NavOptions, gnss_path: Path | None,
-                  baro_path: Path | None, spec: str | dict, lever_arm: tuple[float, float, float],
-                  gate: float) -> tuple[int, dict]:
-    """``mavins nav --gnss/--baro``: the strapdown solution with the error-state filter
+def run_nav_aided(imu_path: Path, init_path: Path, out_path: Path, opts: NavOptions, aiding: AidingFiles,
+                  spec: str | dict, lever_arm: tuple[float, float, float], gate: float) -> tuple[int, dict]:
+    """``mavins nav --gnss/--baro/--mag``: the strapdown solution with the error-state filter
     (core/aided.py), written with the filter's 21 columns after the 14 solution columns.
     Returns the rows written and the measurement counts (accepted, rejected) by kind."""
     import json
@@ -198,10 +209,10 @@ def run_nav_aided(imu_path: Path, init_path: Path, out_path: Path, opts: NavOpti
     from .core import aided
 
     if opts.strapdown.frame != "geographic":
-        raise ValueError(f"--frame {opts.strapdown.frame}: the filter (--gnss, --baro) works in the geographic "
-                         "frame only")
-    files.check_outputs({"-o": out_path}, {"IMU": imu_path, "--init": init_path, "--gnss": gnss_path,
-                                          "--baro": baro_path})
+        raise ValueError(f"--frame {opts.strapdown.frame}: the filter (--gnss, --baro, --mag) works in the "
+                         "geographic frame only")
+    files.check_outputs({"-o": out_path}, {"IMU": imu_path, "--init": init_path, "--gnss": aiding.gnss,
+                                          "--baro": aiding.baro, "--mag": aiding.mag})
     init = files.read_init(init_path)
     init_keys = init.to_dict()
     try:  # the optional initial uncertainty keys of the initial-state JSON
@@ -218,18 +229,24 @@ def run_nav_aided(imu_path: Path, init_path: Path, out_path: Path, opts: NavOpti
         raise files.DataFileError(f"{init_path}: {exc}") from None
     if opts.input == "rates" and opts.strapdown.imu_rates == "sampled":
         raise files.DataFileError("the filter takes increments or averaged rates; sampled rates are not supported "
-                                  "with --gnss/--baro")
+                                  "with --gnss/--baro/--mag")
     columns = files.INCREMENT_COLUMNS if opts.input == "increments" else files.RATE_COLUMNS
     imu = files.read_table(imu_path, columns)
     if opts.input == "rates":
         imu = imu[imu[:, 0] > init.t]
         dt = np.diff(np.concatenate(([init.t], imu[:, 0])))[:, None]
         imu = np.column_stack([imu[:, 0], imu[:, 1:7] * dt])
-    gnss = read_aiding(gnss_path, GNSS_REQUIRED, GNSS_OPTIONAL, no_fix_rows=True) if gnss_path is not None else None
-    baro = read_aiding(baro_path, BARO_REQUIRED, BARO_OPTIONAL) if baro_path is not None else None
+    gnss = read_aiding(aiding.gnss, GNSS_REQUIRED, GNSS_OPTIONAL, no_fix_rows=True) if aiding.gnss is not None else None
+    baro = read_aiding(aiding.baro, BARO_REQUIRED, BARO_OPTIONAL) if aiding.baro is not None else None
+    mag = read_aiding(aiding.mag, MAG_REQUIRED, MAG_OPTIONAL) if aiding.mag is not None else None
+    if mag is not None and np.any(mag[:, 4] <= 0.0):
+        row = int(np.argmax(mag[:, 4] <= 0.0))
+        raise files.DataFileError(f"{aiding.mag}: line {row + 2}, column 'sigma': must be positive (deg of "
+                                  f"heading), got {float(mag[row, 4])!r}")
     try:
         rows, stats = aided.navigate_aided(
-            imu, init_keys, gnss, baro, spec=spec, lever_arm=lever_arm, gate=gate,
+            imu, init_keys, gnss, baro, mag=mag, spec=spec, lever_arm=lever_arm, gate=gate,
+            declination=aiding.declination,
             **{k: v for k, v in opts.strapdown.keywords().items() if k != "imu_rates"})
     except ValueError as exc:
         raise files.DataFileError(str(exc)) from None

@@ -15,8 +15,9 @@ Files (docs/conventions.md "Aided navigation"), written beside imu.csv:
   is no fix);
 * ``baro.csv``: ``t,h,sigma`` (m): ellipsoidal height of the IMU plus a
   constant offset, a random-walk drift and white noise;
-* ``mag.csv``: ``t,mx,my,mz`` (uT, body FRD): the Earth field of the given
-  declination and inclination seen by the IMU, plus hard iron and noise.
+* ``mag.csv``: ``t,mx,my,mz,sigma`` (uT, body FRD; deg): the Earth field of
+  the given declination and inclination seen by the IMU, plus hard iron and
+  noise; ``sigma`` is the heading noise of one sample (:meth:`MagConfig.heading_sigma`).
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ if TYPE_CHECKING:
 
 GNSS_COLUMNS = ("t", "lat", "lon", "h", "vn", "ve", "vd", "sigma_h", "sigma_v", "sigma_vel")
 BARO_COLUMNS = ("t", "h", "sigma")
-MAG_COLUMNS = ("t", "mx", "my", "mz")
+MAG_COLUMNS = ("t", "mx", "my", "mz", "sigma")
 
 _STREAMS = {"gnss": 0x6E1, "baro": 0x6E2, "mag": 0x6E3}
 
@@ -88,6 +89,11 @@ class MagConfig:
     inclination: float = 63.0
     sigma: float = 0.3
     hard_iron: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def heading_sigma(self) -> float:
+        """Heading noise of one sample (rad): the noise across the horizontal field over its
+        strength, ``sigma / (B cos I)`` (the levelled field's angle moves by its perpendicular part)."""
+        return self.sigma / (self.strength * math.cos(math.radians(self.inclination)))
 
     def field_n(self) -> np.ndarray:
         """The Earth field in NED (uT)."""
@@ -243,15 +249,24 @@ def simulate_aiding(
     return Aiding(
         gnss=None if gnss_config is None else gnss(run, gnss_config),
         baro=None if baro_config is None else baro(run, baro_config),
-        mag=None if mag_config is None else magnetometer(run, mag_config),
+        mag=None if mag_config is None else _with_sigma(magnetometer(run, mag_config), mag_config),
     )
+
+
+def _with_sigma(rows: np.ndarray, config: MagConfig) -> np.ndarray:
+    """Magnetometer rows with the ``sigma`` column of mag.csv (deg of heading per sample)."""
+    return np.column_stack([rows, np.full(rows.shape[0], math.degrees(config.heading_sigma()))])
 
 
 def _write_csv(path: Path, columns: Sequence[str], rows: np.ndarray) -> None:
     """CSV with a header and round-trip floats (``nan`` where there is no value)."""
+    rows = np.atleast_2d(np.asarray(rows, dtype=np.float64))
+    if rows.size and rows.shape[1] != len(columns):
+        raise ValueError(f"{path.name}: rows of {rows.shape[1]} values for the {len(columns)} columns "
+                         f"{','.join(columns)}")
     with open(path, "w", encoding="utf-8", newline="") as fh:
         fh.write(",".join(columns) + "\n")
-        for row in np.asarray(rows, dtype=np.float64).tolist():
+        for row in rows.tolist():
             fh.write(",".join(map(repr, row)) + "\n")
 
 

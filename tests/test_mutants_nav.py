@@ -432,7 +432,7 @@ def test_sampled_rates_are_refused_with_the_filter(tmp_path: Path) -> None:
                          imu=write_imu(tmp_path, 20, rates=True))
     assert code == 2
     assert err.strip() == ("mavins nav: error: the filter takes increments or averaged rates; sampled rates are not "
-                           "supported with --gnss/--baro")
+                           "supported with --gnss/--baro/--mag")
 
 
 @pytest.mark.parametrize("frame", ["wander", "free", "inertial"])
@@ -440,7 +440,7 @@ def test_the_filter_works_in_the_geographic_frame_only(tmp_path: Path, frame: st
     """Another mechanisation frame with --gnss is refused in one line, and nothing is written."""
     code, err, _ = aided(tmp_path, "--frame", frame)
     assert code == 2
-    assert err.strip() == (f"mavins nav: error: --frame {frame}: the filter (--gnss, --baro) works in the "
+    assert err.strip() == (f"mavins nav: error: --frame {frame}: the filter (--gnss, --baro, --mag) works in the "
                            "geographic frame only")
     assert not (tmp_path / "nav.csv").exists()
 
@@ -449,7 +449,7 @@ def test_run_nav_aided_returns_rows_and_counts(tmp_path: Path) -> None:
     """Called directly: the rows written and the (accepted, rejected) counts by kind."""
     g = text(tmp_path, f"t,lat,lon,h\n1.05,{LAT},{LON},{H}\n")
     rows, counts = nav.run_nav_aided(write_imu(tmp_path, 20), write_init(tmp_path), tmp_path / "nav.csv", opts(),
-                                     g, None, "tactical", (0.0, 0.0, 0.0), 5.0)
+                                     nav.AidingFiles(g), "tactical", (0.0, 0.0, 0.0), 5.0)
     assert rows == 10
     assert counts["gnss_pos"] == (1, 0) and counts["baro"] == (0, 0)
 
@@ -458,8 +458,8 @@ def test_a_bad_filter_input_is_a_data_file_error(tmp_path: Path) -> None:
     """What the filter refuses (here an IMU spec with a negative noise) comes back as a DataFileError."""
     g = text(tmp_path, "t,lat,lon,h\n")
     with pytest.raises(DataFileError):
-        nav.run_nav_aided(write_imu(tmp_path, 20), write_init(tmp_path), tmp_path / "nav.csv", opts(), g, None,
-                          {"gyro_arw": -1.0, "accel_vrw": 0.1}, (0.0, 0.0, 0.0), 5.0)
+        nav.run_nav_aided(write_imu(tmp_path, 20), write_init(tmp_path), tmp_path / "nav.csv", opts(),
+                          nav.AidingFiles(g), {"gyro_arw": -1.0, "accel_vrw": 0.1}, (0.0, 0.0, 0.0), 5.0)
 
 
 # ---- --each: batch_outputs and run_nav_batch --------------------------------------------------------------------
@@ -509,8 +509,8 @@ def test_a_bad_filter_input_names_what_is_wrong(tmp_path: Path) -> None:
     """The filter's refusal comes back as the one-line error, its text kept."""
     g = text(tmp_path, "t,lat,lon,h\n")
     with pytest.raises(DataFileError, match=r"^gyro_arw must be finite and >= 0, got -"):
-        nav.run_nav_aided(write_imu(tmp_path, 20), write_init(tmp_path), tmp_path / "nav.csv", opts(), g, None,
-                          {"gyro_arw": -1.0, "accel_vrw": 0.1}, (0.0, 0.0, 0.0), 5.0)
+        nav.run_nav_aided(write_imu(tmp_path, 20), write_init(tmp_path), tmp_path / "nav.csv", opts(),
+                          nav.AidingFiles(g), {"gyro_arw": -1.0, "accel_vrw": 0.1}, (0.0, 0.0, 0.0), 5.0)
 
 
 def test_baro_alone_without_gnss(tmp_path: Path) -> None:
@@ -648,3 +648,64 @@ def test_undecodable_bytes_after_the_header_are_one_line(tmp_path: Path) -> None
         with pytest.raises(DataFileError) as err:
             gnss(p)
         assert str(err.value).startswith(f"{p}: cannot read: 'utf-8' codec can't decode byte 0xff in position ")
+
+
+# ---- --mag ----------------------------------------------------------------------------------------------------------
+
+def mag_file(tmp_path: Path, rows: str, header: str = "t,mx,my,mz,sigma") -> Path:
+    return text(tmp_path, header + "\n" + rows, "mag.csv")
+
+
+BETA = math.radians(-27.0)  # a horizontal field 27 deg left of the body's x axis
+
+
+@pytest.mark.parametrize("sigma_col,declination,want", [
+    (",10", "5", 30.0 + 2.0 * 100.0 / (100.0 + 100.0)),  # the field says 32 deg; P = R: half way
+    ("", "5", 30.0 + 2.0 * 100.0 / (100.0 + 9.0)),  # no sigma column: 3 deg
+    (",10", "3", 30.0),  # the field says 30 deg: nothing to correct
+])
+def test_a_magnetometer_sample_corrects_the_yaw(tmp_path: Path, sigma_col: str, declination: str,
+                                               want: float) -> None:
+    """Level at rest, yaw 30 deg with the initial sigma of 10 deg: a horizontal field seen 27 deg left of the body's
+    x axis has the azimuth yaw - 27 deg, which must be the declination: with 5 deg the field says the yaw is 32 deg,
+    and the scalar update moves the yaw by 2 deg P / (P + R) (no tilt coupling: the field has no vertical part;
+    the tactical grade's heading variance grows by below 1e-9 deg^2 before the sample; laboratory mode, so that
+    the Earth's rate does not turn the yaw)."""
+    header = "t,mx,my,mz" + ("," + "sigma" if sigma_col else "")
+    m = mag_file(tmp_path, f"1.055,{math.cos(BETA)!r},{math.sin(BETA)!r},0.0{sigma_col}\n", header)
+    code, err, sol = aided(tmp_path, "--mag", m, "--declination", declination, "--grade", "tactical", "--earth", "none")
+    assert code == 0, err
+    assert "mavins nav: mag: 1 accepted, 0 rejected (gate 5 sigma)" in err
+    assert sol[-1, 9] == pytest.approx(want, abs=1e-6)
+    assert np.all(sol[sol[:, 0] < 1.055, 9] == pytest.approx(30.0, abs=1e-9))
+
+
+@pytest.mark.parametrize("sigma,shown", [("0", "0.0"), ("-1", "-1.0")])
+def test_a_magnetometer_sigma_must_be_positive(tmp_path: Path, sigma: str, shown: str) -> None:
+    m = mag_file(tmp_path, f"1.02,1,0,0,3\n1.04,1,0,0,{sigma}\n")
+    code, err, _ = aided(tmp_path, "--mag", m)
+    assert code == 2
+    assert err == f"mavins nav: error: {m}: line 3, column 'sigma': must be positive (deg of heading), got {shown}\n"
+    assert not (tmp_path / "nav.csv").exists()
+
+
+def test_mag_alone_runs_the_filter(tmp_path: Path) -> None:
+    """``--mag`` without ``--gnss`` or ``--baro`` runs the filter: the filter's columns, the sample counted."""
+    imu, init, out = write_imu(tmp_path, 20), write_init(tmp_path), tmp_path / "nav.csv"
+    m = mag_file(tmp_path, f"1.05,{math.cos(BETA)!r},{math.sin(BETA)!r},0.0,3\n")
+    code, err = run("nav", imu, "--init", init, "-o", out, "--mag", m, "--declination", "3")
+    assert code == 0, err
+    assert "mavins nav: mag: 1 accepted, 0 rejected (gate 5 sigma)" in err
+    header, sol = table(out)
+    assert header == SOLUTION + FILTER and sol.shape[0] == 10
+
+
+def test_several_imu_files_or_each_refuse_mag(tmp_path: Path) -> None:
+    imu, init, out = write_imu(tmp_path, 20), write_init(tmp_path), tmp_path / "nav.csv"
+    imu2 = write_imu(tmp_path, 20, name="imu2.csv")
+    m = mag_file(tmp_path, "1.05,1,0,0,3\n")
+    code, err = run("nav", imu, imu2, "--init", init, "-o", out, "--mag", m)
+    assert code == 2 and err == ("mavins nav: error: several IMU files with --gnss/--baro/--mag are not supported "
+                                 "(the fused solution is free inertial)\n")
+    code, err = run("nav", "--each", imu, "-o", tmp_path / "out", "--mag", m)
+    assert code == 2 and err == "mavins nav: error: --each navigates free inertial; --mag cannot go with it\n"
