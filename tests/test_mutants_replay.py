@@ -1480,8 +1480,17 @@ def test_replay_progress_on_a_terminal(tmp_path: Path, monkeypatch: pytest.Monke
         monkeypatch.setattr(sys, "stderr", tty)
         res = run(log, **AT_REST)
         tty.flush()
-        shown = os.read(master, 1 << 16).decode()
+    chunks = []  # one read returns what the pty holds at that moment: read until the closed side says EOF
+    while True:
+        try:
+            chunk = os.read(master, 1 << 16)
+        except OSError:  # EIO: the terminal side is closed and drained (Linux)
+            break
+        if not chunk:
+            break
+        chunks.append(chunk)
     os.close(master)
+    shown = b"".join(chunks).decode()
     assert res.messages == 4000
     bars = re.findall(r"\rreplay p\.tlog \[(#*) *\] +([0-9.]+)% eta +[0-9.]+ s", shown)
     assert bars == [("#" * 15, "50.0"), ("#" * 30, "100.0"), ("#" * 30, "100.0")]  # messages 2000, 4000; the end
