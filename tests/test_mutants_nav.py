@@ -663,6 +663,7 @@ BETA = math.radians(-27.0)  # a horizontal field 27 deg left of the body's x axi
     (",10", "5", 30.0 + 2.0 * 100.0 / (100.0 + 100.0)),  # the field says 32 deg; P = R: half way
     ("", "5", 30.0 + 2.0 * 100.0 / (100.0 + 9.0)),  # no sigma column: 3 deg
     (",10", "3", 30.0),  # the field says 30 deg: nothing to correct
+    (",0.5", "5", 30.0 + 2.0 * 100.0 / (100.0 + 0.25)),  # a sigma below 1 deg is a sigma like any other
 ])
 def test_a_magnetometer_sample_corrects_the_yaw(tmp_path: Path, sigma_col: str, declination: str,
                                                want: float) -> None:
@@ -682,11 +683,21 @@ def test_a_magnetometer_sample_corrects_the_yaw(tmp_path: Path, sigma_col: str, 
 
 @pytest.mark.parametrize("sigma,shown", [("0", "0.0"), ("-1", "-1.0")])
 def test_a_magnetometer_sigma_must_be_positive(tmp_path: Path, sigma: str, shown: str) -> None:
-    m = mag_file(tmp_path, f"1.02,1,0,0,3\n1.04,1,0,0,{sigma}\n")
+    m = mag_file(tmp_path, f"1.02,1,0,0,0.5\n1.04,1,0,0,{sigma}\n")  # the first row is fine: line 3 is named
     code, err, _ = aided(tmp_path, "--mag", m)
     assert code == 2
     assert err == f"mavins nav: error: {m}: line 3, column 'sigma': must be positive (deg of heading), got {shown}\n"
     assert not (tmp_path / "nav.csv").exists()
+
+
+def test_the_output_may_not_be_the_magnetometer_file(tmp_path: Path) -> None:
+    m = mag_file(tmp_path, "1.05,1,0,0,3\n")
+    before = m.read_bytes()
+    code, err = run("nav", write_imu(tmp_path, 20), "--init", write_init(tmp_path), "-o", m, "--mag", m)
+    assert code == 2
+    assert err == (f"mavins nav: error: {m}: -o is also the input --mag: writing it would destroy the input; "
+                   "choose another output file\n")
+    assert m.read_bytes() == before
 
 
 def test_mag_alone_runs_the_filter(tmp_path: Path) -> None:
