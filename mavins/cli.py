@@ -152,7 +152,7 @@ def _add_nav(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--jobs", type=_positive_int(1, 1024), default=None, metavar="N",
                    help="with --each: worker processes (default: every core)")
     _strapdown_options(p)
-    g = p.add_argument_group("aided navigation (with --gnss, --baro and/or --mag; docs/filter.md)")
+    g = p.add_argument_group("aided navigation (with --gnss, --baro, --mag and/or --rest; docs/filter.md)")
     g.add_argument("--gnss", type=Path, metavar="GNSS.csv",
                    help="GNSS fixes: t,lat,lon,h [,sigma_h,sigma_v,vn,ve,vd,sigma_vel] (docs/conventions.md)")
     g.add_argument("--baro", type=Path, metavar="BARO.csv", help="barometric height: t,h [,sigma]")
@@ -161,6 +161,10 @@ def _add_nav(sub: argparse._SubParsersAction) -> None:
                         "one sample, deg, default 3)")
     g.add_argument("--declination", type=_real(-180.0, 180.0), default=0.0, metavar="DEG",
                    help="magnetic declination for --mag (east positive)")
+    g.add_argument("--rest", type=_Outage(), action="append", default=[], metavar="START,END",
+                   help="the vehicle stood still over this interval of sensor time (s): a zero-velocity update at "
+                        "every attitude update inside it and a zero-rate update (the gyro bias) at its end; "
+                        "repeatable")
     _filter_options(g, with_aiding=False)
     p.add_argument("--timing", action="store_true", help="print read/compute/write seconds to stderr")
     r = p.add_argument_group("redundant IMUs (several IMU files; noise from --grade/--imu-spec; docs/redundancy.md)")
@@ -314,13 +318,14 @@ def _cmd_nav(args: argparse.Namespace) -> int:
     try:
         if len(args.imu) > 1 or args.fdi_log is not None:
             return _cmd_nav_fdi(args, opts)
-        if args.gnss is None and args.baro is None and args.mag is None:
+        if args.gnss is None and args.baro is None and args.mag is None and not args.rest:
             rows = run_nav(args.imu[0], args.init, args.output, opts)
         else:
             from .nav import AidingFiles, run_nav_aided
 
             rows, counts = run_nav_aided(args.imu[0], args.init, args.output, opts,
-                                         AidingFiles(args.gnss, args.baro, args.mag, args.declination),
+                                         AidingFiles(args.gnss, args.baro, args.mag, args.declination,
+                                                     tuple(args.rest)),
                                          _imu_spec(args), args.lever_arm, args.gate)
             for kind, (ok, bad) in counts.items():
                 if ok or bad:
@@ -339,7 +344,7 @@ def _cmd_nav_each(args: argparse.Namespace, opts: object) -> int:
     from .nav import run_nav_batch
 
     bad = [name for name, v in (("--gnss", args.gnss), ("--baro", args.baro), ("--mag", args.mag),
-                                ("--fdi-log", args.fdi_log)) if v is not None]
+                                ("--rest", args.rest or None), ("--fdi-log", args.fdi_log)) if v is not None]
     if bad:
         print(f"mavins nav: error: --each navigates free inertial; {', '.join(bad)} cannot go with it",
               file=sys.stderr)
@@ -366,9 +371,9 @@ def _cmd_nav_fdi(args: argparse.Namespace, opts: object) -> int:
     from .fdi import run_nav_fdi, strapdown_keywords
 
     try:
-        if args.gnss is not None or args.baro is not None or args.mag is not None:
-            raise ValueError("several IMU files with --gnss/--baro/--mag are not supported (the fused solution is "
-                             "free inertial)")
+        if args.gnss is not None or args.baro is not None or args.mag is not None or args.rest:
+            raise ValueError("several IMU files with --gnss/--baro/--mag/--rest are not supported (the fused "
+                             "solution is free inertial)")
         rows, events = run_nav_fdi(args.imu, args.init, args.output, args.fdi_log, rates=args.input == "rates",
                                    strapdown=strapdown_keywords(opts), spec=_imu_spec(args),
                                    false_alarm=args.false_alarm)

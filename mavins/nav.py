@@ -130,12 +130,26 @@ MAG_OPTIONAL = ("sigma",)
 
 @dataclass(frozen=True)
 class AidingFiles:
-    """The aiding files of ``mavins nav`` (None = not given) and the magnetic declination (deg, east positive)."""
+    """The aiding inputs of ``mavins nav``: files (None = not given), the magnetic declination (deg, east
+    positive) and the rest intervals ``(start, end)`` (s, sensor time)."""
 
     gnss: Path | None = None
     baro: Path | None = None
     mag: Path | None = None
     declination: float = 0.0
+    rest: tuple[tuple[float, float], ...] = ()
+
+
+def rest_windows(rest: tuple[tuple[float, float], ...]) -> np.ndarray | None:
+    """``--rest`` intervals sorted by start, as core/aided.py's static rows ``t0, t1``; overlapping ones are
+    refused (ValueError naming both)."""
+    if not rest:
+        return None
+    ordered = sorted(rest)
+    for (a0, a1), (b0, b1) in zip(ordered, ordered[1:]):
+        if b0 < a1:
+            raise ValueError(f"--rest {a0:g},{a1:g} and --rest {b0:g},{b1:g} overlap")
+    return np.array(ordered, dtype=float)
 
 
 def read_aiding(path: Path, required: tuple[str, ...], optional: tuple[str, ...],
@@ -201,7 +215,7 @@ def _aiding_rows(path: Path, header: list[str], cols: tuple[str, ...], may_be_em
 
 def run_nav_aided(imu_path: Path, init_path: Path, out_path: Path, opts: NavOptions, aiding: AidingFiles,
                   spec: str | dict, lever_arm: tuple[float, float, float], gate: float) -> tuple[int, dict]:
-    """``mavins nav --gnss/--baro/--mag``: the strapdown solution with the error-state filter
+    """``mavins nav --gnss/--baro/--mag/--rest``: the strapdown solution with the error-state filter
     (core/aided.py), written with the filter's 21 columns after the 14 solution columns.
     Returns the rows written and the measurement counts (accepted, rejected) by kind."""
     import json
@@ -209,8 +223,9 @@ def run_nav_aided(imu_path: Path, init_path: Path, out_path: Path, opts: NavOpti
     from .core import aided
 
     if opts.strapdown.frame != "geographic":
-        raise ValueError(f"--frame {opts.strapdown.frame}: the filter (--gnss, --baro, --mag) works in the "
+        raise ValueError(f"--frame {opts.strapdown.frame}: the filter (--gnss, --baro, --mag, --rest) works in the "
                          "geographic frame only")
+    static = rest_windows(aiding.rest)
     files.check_outputs({"-o": out_path}, {"IMU": imu_path, "--init": init_path, "--gnss": aiding.gnss,
                                           "--baro": aiding.baro, "--mag": aiding.mag})
     init = files.read_init(init_path)
@@ -229,7 +244,7 @@ def run_nav_aided(imu_path: Path, init_path: Path, out_path: Path, opts: NavOpti
         raise files.DataFileError(f"{init_path}: {exc}") from None
     if opts.input == "rates" and opts.strapdown.imu_rates == "sampled":
         raise files.DataFileError("the filter takes increments or averaged rates; sampled rates are not supported "
-                                  "with --gnss/--baro/--mag")
+                                  "with --gnss/--baro/--mag/--rest")
     columns = files.INCREMENT_COLUMNS if opts.input == "increments" else files.RATE_COLUMNS
     imu = files.read_table(imu_path, columns)
     if opts.input == "rates":
@@ -245,7 +260,7 @@ def run_nav_aided(imu_path: Path, init_path: Path, out_path: Path, opts: NavOpti
                                   f"heading), got {float(mag[row, 4])!r}")
     try:
         rows, stats = aided.navigate_aided(
-            imu, init_keys, gnss, baro, mag=mag, spec=spec, lever_arm=lever_arm, gate=gate,
+            imu, init_keys, gnss, baro, mag=mag, static=static, spec=spec, lever_arm=lever_arm, gate=gate,
             declination=aiding.declination,
             **{k: v for k, v in opts.strapdown.keywords().items() if k != "imu_rates"})
     except ValueError as exc:

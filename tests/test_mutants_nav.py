@@ -432,7 +432,7 @@ def test_sampled_rates_are_refused_with_the_filter(tmp_path: Path) -> None:
                          imu=write_imu(tmp_path, 20, rates=True))
     assert code == 2
     assert err.strip() == ("mavins nav: error: the filter takes increments or averaged rates; sampled rates are not "
-                           "supported with --gnss/--baro/--mag")
+                           "supported with --gnss/--baro/--mag/--rest")
 
 
 @pytest.mark.parametrize("frame", ["wander", "free", "inertial"])
@@ -440,7 +440,7 @@ def test_the_filter_works_in_the_geographic_frame_only(tmp_path: Path, frame: st
     """Another mechanisation frame with --gnss is refused in one line, and nothing is written."""
     code, err, _ = aided(tmp_path, "--frame", frame)
     assert code == 2
-    assert err.strip() == (f"mavins nav: error: --frame {frame}: the filter (--gnss, --baro, --mag) works in the "
+    assert err.strip() == (f"mavins nav: error: --frame {frame}: the filter (--gnss, --baro, --mag, --rest) works in the "
                            "geographic frame only")
     assert not (tmp_path / "nav.csv").exists()
 
@@ -716,7 +716,46 @@ def test_several_imu_files_or_each_refuse_mag(tmp_path: Path) -> None:
     imu2 = write_imu(tmp_path, 20, name="imu2.csv")
     m = mag_file(tmp_path, "1.05,1,0,0,3\n")
     code, err = run("nav", imu, imu2, "--init", init, "-o", out, "--mag", m)
-    assert code == 2 and err == ("mavins nav: error: several IMU files with --gnss/--baro/--mag are not supported "
+    assert code == 2 and err == ("mavins nav: error: several IMU files with --gnss/--baro/--mag/--rest are not supported "
                                  "(the fused solution is free inertial)\n")
     code, err = run("nav", "--each", imu, "-o", tmp_path / "out", "--mag", m)
     assert code == 2 and err == "mavins nav: error: --each navigates free inertial; --mag cannot go with it\n"
+
+
+# ---- --rest ---------------------------------------------------------------------------------------------------------
+
+def test_rest_windows_are_sorted_and_may_not_overlap() -> None:
+    assert nav.rest_windows(()) is None
+    np.testing.assert_array_equal(nav.rest_windows(((5.0, 6.0), (1.0, 2.0), (2.0, 3.0))),
+                                  [[1.0, 2.0], [2.0, 3.0], [5.0, 6.0]])
+    with pytest.raises(ValueError) as e:
+        nav.rest_windows(((1.0, 2.5), (2.0, 3.0)))
+    assert str(e.value) == "--rest 1,2.5 and --rest 2,3 overlap"
+
+
+def test_rest_alone_runs_the_filter(tmp_path: Path) -> None:
+    """``--rest`` without aiding files: a zero-velocity update at each of the 10 attitude updates in (1.0, 1.2] and
+    one zero-rate update at its end, counted; the filter's columns."""
+    imu, init, out = write_imu(tmp_path, 20), write_init(tmp_path), tmp_path / "nav.csv"
+    code, err = run("nav", imu, "--init", init, "-o", out, "--rest", "1.0,1.2", "--earth", "none")
+    assert code == 0, err
+    assert "mavins nav: zupt: 10 accepted, 0 rejected (gate 5 sigma)" in err
+    assert "mavins nav: zaru: 1 accepted, 0 rejected (gate 5 sigma)" in err
+    header, sol = table(out)
+    assert header == SOLUTION + FILTER and sol.shape[0] == 10
+
+
+def test_overlapping_rests_are_one_line_and_no_output(tmp_path: Path) -> None:
+    imu, init, out = write_imu(tmp_path, 20), write_init(tmp_path), tmp_path / "nav.csv"
+    code, err = run("nav", imu, "--init", init, "-o", out, "--rest", "1.1,1.2", "--rest", "1.0,1.15")
+    assert code == 2 and err == "mavins nav: error: --rest 1,1.15 and --rest 1.1,1.2 overlap\n"
+    assert not out.exists()
+
+
+def test_several_imu_files_or_each_refuse_rest(tmp_path: Path) -> None:
+    imu, init, out = write_imu(tmp_path, 20), write_init(tmp_path), tmp_path / "nav.csv"
+    imu2 = write_imu(tmp_path, 20, name="imu2.csv")
+    code, err = run("nav", imu, imu2, "--init", init, "-o", out, "--rest", "1,1.1")
+    assert code == 2 and "several IMU files with --gnss/--baro/--mag/--rest are not supported" in err
+    code, err = run("nav", "--each", imu, "-o", tmp_path / "out", "--rest", "1,1.1")
+    assert code == 2 and err == "mavins nav: error: --each navigates free inertial; --rest cannot go with it\n"
