@@ -161,7 +161,7 @@ def _add_nav(sub: argparse._SubParsersAction) -> None:
                         "one sample, deg, default 3)")
     g.add_argument("--declination", type=_real(-180.0, 180.0), default=0.0, metavar="DEG",
                    help="magnetic declination for --mag (east positive)")
-    g.add_argument("--rest", type=_Outage(), action="append", default=[], metavar="START,END",
+    g.add_argument("--rest", type=_Outage(), action="append", metavar="START,END",
                    help="the vehicle stood still over this interval of sensor time (s): a zero-velocity update at "
                         "every attitude update inside it and a zero-rate update (the gyro bias) at its end; "
                         "repeatable")
@@ -318,14 +318,14 @@ def _cmd_nav(args: argparse.Namespace) -> int:
     try:
         if len(args.imu) > 1 or args.fdi_log is not None:
             return _cmd_nav_fdi(args, opts)
-        if args.gnss is None and args.baro is None and args.mag is None and not args.rest:
+        if args.gnss is None and args.baro is None and args.mag is None and args.rest is None:
             rows = run_nav(args.imu[0], args.init, args.output, opts)
         else:
             from .nav import AidingFiles, run_nav_aided
 
             rows, counts = run_nav_aided(args.imu[0], args.init, args.output, opts,
                                          AidingFiles(args.gnss, args.baro, args.mag, args.declination,
-                                                     tuple(args.rest)),
+                                                     tuple(args.rest or ())),
                                          _imu_spec(args), args.lever_arm, args.gate)
             for kind, (ok, bad) in counts.items():
                 if ok or bad:
@@ -344,7 +344,7 @@ def _cmd_nav_each(args: argparse.Namespace, opts: object) -> int:
     from .nav import run_nav_batch
 
     bad = [name for name, v in (("--gnss", args.gnss), ("--baro", args.baro), ("--mag", args.mag),
-                                ("--rest", args.rest or None), ("--fdi-log", args.fdi_log)) if v is not None]
+                                ("--rest", args.rest), ("--fdi-log", args.fdi_log)) if v is not None]
     if bad:
         print(f"mavins nav: error: --each navigates free inertial; {', '.join(bad)} cannot go with it",
               file=sys.stderr)
@@ -371,7 +371,7 @@ def _cmd_nav_fdi(args: argparse.Namespace, opts: object) -> int:
     from .fdi import run_nav_fdi, strapdown_keywords
 
     try:
-        if args.gnss is not None or args.baro is not None or args.mag is not None or args.rest:
+        if any(v is not None for v in (args.gnss, args.baro, args.mag, args.rest)):
             raise ValueError("several IMU files with --gnss/--baro/--mag/--rest are not supported (the fused "
                              "solution is free inertial)")
         rows, events = run_nav_fdi(args.imu, args.init, args.output, args.fdi_log, rates=args.input == "rates",
