@@ -430,8 +430,8 @@ def _add_sim(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--gnss-outage", type=_Outage(), metavar="START,END",
                    help="no GNSS fix between these sensor times (s), in files and when streaming")
     p.add_argument("--mag-rate", type=_real(0.0, 100.0), default=0.0, metavar="HZ",
-                   help="magnetometer samples per second written to mag.csv (0 = none; 48 uT field, declination "
-                        "2 deg, inclination 63 deg, 0.3 uT noise; docs/simulator.md)")
+                   help="magnetometer samples per second written to mag.csv, or streamed in HIGHRES_IMU (0 = none; "
+                        "48 uT field, declination 2 deg, inclination 63 deg, 0.3 uT noise; docs/simulator.md)")
     p.add_argument("--imus", type=_positive_int(1, 3), default=1, metavar="N",
                    help="IMUs (1..3): extras written as imu1.csv, imu2.csv, streamed as HIGHRES_IMU id 1, 2 "
                         "(with --msg raw as SCALED_IMU2/3); scenario [[faults]] name them (docs/redundancy.md)")
@@ -481,7 +481,8 @@ def _cmd_sim(args: argparse.Namespace) -> int:
 
     outages = (tuple(args.gnss_outage),) if args.gnss_outage else ()
     stats = stream(run, args.stream, StreamOptions(msg=args.msg, imu_rates=args.imu_rates, speed=speed, sysid=args.sysid,
-                                                  imus=args.imus, seed=args.seed, gnss_outages=outages))
+                                                  imus=args.imus, seed=args.seed, gnss_outages=outages,
+                                                  mag_rate=args.mag_rate))
     print(f"mavins sim: streamed {stats.imu_messages} IMU messages to {args.stream}", file=sys.stderr)
     return 0
 

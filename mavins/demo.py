@@ -156,9 +156,14 @@ def compare(collected: Collected, truth: np.ndarray) -> dict[str, object]:
 PREWARM_WAIT_S = 600.0  # s: the longest the demo waits for the compiling process before it compiles itself
 
 
+MAG_RATE = 10.0  # Hz: the simulated magnetometer in HIGHRES_IMU when the demo aids with it
+
+
 def _engine_config(lat: float, lon: float, alt: float, heading: str, grade: str,
                    aiding: tuple[str, ...]) -> EngineConfig:
-    return EngineConfig(lat=lat, lon=lon, alt=alt, heading=heading, align=5.0,
+    from sim.aiding import MagConfig
+
+    return EngineConfig(lat=lat, lon=lon, alt=alt, heading=heading, align=5.0, declination=MagConfig().declination,
                         filter=FilterSettings(spec=grade if grade != "ideal" else "navigation", aiding=aiding))
 
 
@@ -229,7 +234,9 @@ def run_demo(
     srv.start()
     try:
         outages = (gnss_outage,) if gnss_outage is not None else ()
-        stream(run, f"udpout:127.0.0.1:{p_in}", StreamOptions(speed=speed, gnss_outages=outages), stop=stop)
+        mag_rate = MAG_RATE if "mag" in aiding else 0.0
+        stream(run, f"udpout:127.0.0.1:{p_in}", StreamOptions(speed=speed, gnss_outages=outages, mag_rate=mag_rate),
+               stop=stop)
         time.sleep(0.5)
     finally:
         svc_stop.set()

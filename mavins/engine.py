@@ -74,7 +74,7 @@ class EngineConfig:
     zupt_accel: float = 0.15  # m/s^2: ||f| - g| below this likewise
     zupt_still_s: float = 0.5  # s of still samples before zero-velocity updates start
     zupt_every_s: float = 0.1  # s between zero-velocity updates while still
-    aiding_every_s: float = 0.1  # s between magnetometer updates
+    aiding_every_s: float = 0.1  # s between magnetometer updates (a sample up to a quarter of it early is taken)
 
 
 @dataclass
@@ -267,10 +267,11 @@ class Engine:
         s = self._s
         flt = self.filter
         r = flt.push(s, self._kcfg, smp.t, smp.gyro, smp.accel)  # type: ignore[arg-type]
+        self._mag_from_sample(smp)  # any sample may carry one: it waits for the update that passes it
         if r != 1:
             return None
         self._gyro_last = flt.body_rate(smp.gyro)  # the update's last sample, bias removed (published, ZUPT)
-        self._aid_from_sample(smp)
+        self._zupt_from_sample(smp)
         t = sd.state_time(s)  # type: ignore[arg-type]
         if not self.degraded and sd.frame_limit(s) is not None:  # type: ignore[arg-type]
             self.degraded = True
@@ -292,14 +293,21 @@ class Engine:
         return Solution(self._row.copy(), np.array(self._gyro_last), self._pos, self.degraded,  # type: ignore[arg-type]
                         flt.uncertainty(t, self.counters["restarts"]))
 
-    def _aid_from_sample(self, smp: ImuSample) -> None:
-        """Measurements the IMU sample itself carries: magnetometer heading, and zero velocity
-        while the standstill detector says the vehicle is still (docs/filter.md)."""
+    def _mag_from_sample(self, smp: ImuSample) -> None:
+        """The magnetometer heading an IMU sample carries, at most one per ``aiding_every_s`` (docs/filter.md);
+        taken on whichever sample it rides, the filter applies it at the update that passes its time."""
+        t = smp.t
+        if "mag" in self.cfg.filter.aiding and smp.mag is not None and t >= self._next_mag and any(smp.mag):
+            # a quarter of the interval early still counts: a magnetometer at exactly that rate, whose
+            # samples arrive 0.1 s apart give or take rounding and jitter, keeps every sample
+            self._next_mag = t + 0.75 * self.cfg.aiding_every_s
+            self.filter.measure(self._s, self._kcfg, t, "mag", smp.mag)  # type: ignore[arg-type]
+
+    def _zupt_from_sample(self, smp: ImuSample) -> None:
+        """Zero velocity while the standstill detector says the vehicle is still (docs/filter.md), checked at
+        each attitude update with its last sample."""
         aiding = self.cfg.filter.aiding
         t = smp.t
-        if "mag" in aiding and smp.mag is not None and t >= self._next_mag and any(smp.mag):
-            self._next_mag = t + self.cfg.aiding_every_s
-            self.filter.measure(self._s, self._kcfg, t, "mag", smp.mag)  # type: ignore[arg-type]
         if "zupt" not in aiding:
             return
         g_ref = earth.gravity(math.radians(self._pos[0]), self._pos[2])  # type: ignore[index]
