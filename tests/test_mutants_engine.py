@@ -630,20 +630,33 @@ def test_magnetometer_heading_updates_every_tenth_of_a_second():
     assert e.filter.counters["mag_accepted"] == 2
 
 
-def test_a_magnetometer_sample_between_updates_is_used():
+@pytest.mark.parametrize("on_update", [False, True])
+def test_a_magnetometer_sample_on_either_sample_of_an_update_is_used(on_update: bool):
     """Two samples per attitude update: a magnetometer sample on the first of a pair (no update completes there)
-    waits for the update that passes its time and is applied then, as on the second: the heading moves by
-    100/109 of the 4 deg (see above) at that update, one sample accepted."""
+    waits for the update that passes its time; one on the second is applied at once. Either way the heading
+    moves by 100/109 of the 4 deg (see above) at that update, one sample accepted."""
     decl = math.degrees(math.atan2(M_N[1], M_N[0])) + 4.0
     e = aided(aiding=("mag",), declination=decl)
     t = align(e, mag=False)
     before, t = step(e, t, mag=False)
-    assert e.on_imu(rest(t, mag=True)) is None  # the first sample of the pair: no update yet
+    assert e.on_imu(rest(t, mag=not on_update)) is None  # the first sample of the pair: no update yet
     t = round(t + DT, 9)
-    out = e.on_imu(rest(t, mag=False))
+    out = e.on_imu(rest(t, mag=on_update))
     assert out is not None
     assert math.degrees(out.row[9]) - math.degrees(before.row[9]) == pytest.approx(4.0 * 100.0 / 109.0, abs=0.1)
     assert e.filter.counters["mag_accepted"] == 1
+
+
+def test_the_next_magnetometer_sample_may_come_three_quarters_of_the_interval_later():
+    """After one is taken at t, a sample at exactly t + 0.75 x 0.1 s is taken too, one just before it is not."""
+    for dt_next, taken in ((0.75 * 0.1, 2), (0.75 * 0.1 - 1e-6, 1)):
+        e = aided(aiding=("mag",))
+        t = align(e, mag=False)
+        _, t = step(e, t, mag=False)
+        e.on_imu(rest(t, mag=True))
+        e.on_imu(rest(t + dt_next, mag=True))
+        assert e.filter.counters["mag_accepted"] + e.filter.counters["mag_rejected"] + len(e.filter._pending) \
+            == taken, dt_next
 
 
 @pytest.mark.parametrize("mag", [None, (0.0, 0.0, 0.0)])
