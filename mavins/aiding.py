@@ -228,7 +228,7 @@ class LiveFilter:
         elif kind == "mag":
             (m_b,) = args
             self._update(s, cfg, "mag", ("mag",), kalman.mag_heading(
-                s, np.asarray(m_b, dtype=float), np.array(self._w_ib), late, math.radians(self.settings.declination),
+                s, cfg, np.asarray(m_b, dtype=float), np.array(self._w_ib), late, math.radians(self.settings.declination),
                 math.radians(self.settings.sigma_mag)))
         elif kind == "zupt":
             self._update(s, cfg, "zupt", ("vel",), kalman.zupt(s, self.settings.sigma_zupt))

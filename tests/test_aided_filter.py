@@ -425,7 +425,7 @@ def test_zupt_zaru_and_magnetometer_at_rest(static_run) -> None:
     assert rows[-1, 31] ** 2 <= g.random_walk**2 / last + walk * last / 3.0 + walk * (rows[-1, 0] - 59.9)
     assert abs(rows[-1, 25] - bg[idx[-1], 2]) < 3.0 * rows[-1, 31]
     assert abs(err[-1, 2]) < 3.0 * rows[-1, 22]
-    _, H, _ = kf.mag_heading(st["state"], mag[-1, 1:4], np.zeros(3), 0.0, math.radians(mag_cfg.declination), sig_yaw)
+    _, H, _ = kf.mag_heading(st["state"], sd.make_config(), mag[-1, 1:4], np.zeros(3), 0.0, math.radians(mag_cfg.declination), sig_yaw)
     h = H[0, 0:3]
     assert np.hypot(h[0], h[1]) == pytest.approx(math.tan(math.radians(mag_cfg.inclination)), rel=0.02)
     sig_z = math.sqrt(h @ st["P"][0:3, 0:3] @ h)
@@ -676,7 +676,7 @@ def test_measurement_models_linearise_the_measurement(which: str) -> None:
         m_b = c_true.T @ m_n
 
         def measure(s):
-            return kf.mag_heading(s, m_b, np.zeros(3), 0.0, 0.05, 0.01)
+            return kf.mag_heading(s, CFG, m_b, np.zeros(3), 0.0, 0.05, 0.01)
         tol = 2e-5
     else:
         def measure(s):

@@ -764,14 +764,14 @@ def test_mag_heading_with_declination() -> None:
     inc, dec = 60.0 * DEG, 10.0 * DEG
     m_n = 48.0 * np.array([math.cos(inc) * math.cos(dec), math.cos(inc) * math.sin(dec), math.sin(inc)])
     m_b = cbn(*ATT).T @ m_n
-    nu, H, R = kf.mag_heading(s, m_b, np.zeros(3), 0.0, dec - 0.05, 0.02)
+    nu, H, R = kf.mag_heading(s, CFG, m_b, np.zeros(3), 0.0, dec - 0.05, 0.02)
     assert nu[0] == pytest.approx(0.05, rel=1e-12, abs=0)
     He = np.zeros((1, 22))
     He[0, 0:3] = [-math.tan(inc) * math.cos(dec), -math.tan(inc) * math.sin(dec), 1.0]
     np.testing.assert_allclose(H, He, rtol=0, atol=1e-14)
     np.testing.assert_allclose(R, [[0.0004]], rtol=1e-15, atol=0)
     # wrapped: a declination of 10 deg against a field seen at 10 deg - 2 pi + 0.1
-    nu, _, _ = kf.mag_heading(s, m_b, np.zeros(3), 0.0, dec + 2 * math.pi - 0.1, 0.02)
+    nu, _, _ = kf.mag_heading(s, CFG, m_b, np.zeros(3), 0.0, dec + 2 * math.pi - 0.1, 0.02)
     assert nu[0] == pytest.approx(0.1, rel=1e-12, abs=0)
 
 
@@ -790,12 +790,34 @@ def test_mag_heading_carries_a_late_sample_to_the_solution_time() -> None:
     for w in (np.array([0.15, -0.25, 0.35]), np.array([0.4, 0.0, 0.0]), np.array([0.0, -0.4, 0.0]),
               np.array([0.0, 0.0, 0.4])):
         m_b = rodrigues(w * dt) @ c.T @ m_n
-        nu, _, _ = kf.mag_heading(s, m_b, w, dt, dec, 0.02)
+        nu, _, _ = kf.mag_heading(s, CFG_LAB, m_b, w, dt, dec, 0.02)
         assert abs(nu[0]) < bound_of(w), w
-        nu_0, _, _ = kf.mag_heading(s, m_b, w, 0.0, dec, 0.02)
+        nu_0, _, _ = kf.mag_heading(s, CFG_LAB, m_b, w, 0.0, dec, 0.02)
         assert abs(nu_0[0]) > 20.0 * bound_of(w), w
-    nu, _, _ = kf.mag_heading(s, c.T @ m_n, np.array([0.15, -0.25, 0.35]), 0.0, dec, 0.02)
+    nu, _, _ = kf.mag_heading(s, CFG_LAB, c.T @ m_n, np.array([0.15, -0.25, 0.35]), 0.0, dec, 0.02)
     assert abs(nu[0]) < 1e-12
+
+
+def test_mag_heading_carries_with_the_rate_against_the_navigation_frame() -> None:
+    """The navigation frame turns with the Earth and, moving, with the transport rate: a body fixed in it has
+    w_ib = C^T (w_ie + w_en) and sees the field unchanged, so a sample dt old needs no carry: with the WGS-84
+    Earth (rates typed here: Omega [cos L, 0, -sin L], w_en = [v_E/(R_E+h), -v_N/(R_N+h), -v_E tan L/(R_E+h)])
+    the innovation is zero; carried by w_ib itself (laboratory mode, where the frame does not turn) it is off by
+    about |w_in| dt (1e-6 rad in 20 ms here)."""
+    s = state()
+    inc, dec = 60.0 * DEG, 10.0 * DEG
+    m_n = 48.0 * np.array([math.cos(inc) * math.cos(dec), math.cos(inc) * math.sin(dec), math.sin(inc)])
+    c = cbn(*ATT)
+    r_n, r_e = radii(LAT)
+    vn, ve, _ = V0
+    w_in = OMEGA * np.array([math.cos(LAT), 0.0, -math.sin(LAT)]) + np.array(
+        [ve / (r_e + H0), -vn / (r_n + H0), -ve * math.tan(LAT) / (r_e + H0)])
+    w_ib = c.T @ w_in
+    m_b = c.T @ m_n
+    nu, _, _ = kf.mag_heading(s, CFG, m_b, w_ib, 0.02, dec, 0.02)
+    assert abs(nu[0]) < 1e-12
+    nu_lab, _, _ = kf.mag_heading(s, CFG_LAB, m_b, w_ib, 0.02, dec, 0.02)
+    assert abs(nu_lab[0]) > 0.1 * np.linalg.norm(w_in) * 0.02
 
 
 def test_zupt() -> None:

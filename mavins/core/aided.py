@@ -330,7 +330,7 @@ def run_aided(
             _propagate(s, cfg, spec, P, acc, GEOGRAPHIC)
             m_b[0], m_b[1], m_b[2] = mag[im, 1], mag[im, 2], mag[im, 3]
             if np.isfinite(m_b[0]) and np.isfinite(m_b[1]) and np.isfinite(m_b[2]):
-                nu, H, R = kf.mag_heading(s, m_b, w_ib, tk - mag[im, 0], declination, mag[im, 4])
+                nu, H, R = kf.mag_heading(s, cfg, m_b, w_ib, tk - mag[im, 0], declination, mag[im, 4])
                 nis, ratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate, kf.MAG_FREE)
                 n_log = _record(log, n_log, counts, mag[im, 0], K_MAG, 1, nis, ratio, ok)
             im += 1

@@ -31,7 +31,7 @@ EXPORTS = (
     Export("kalman", "gnss_position", f"{MEASUREMENT}({V}, {V}, f8, f8, f8, {V}, f8, f8, f8)"),
     Export("kalman", "gnss_velocity", f"{MEASUREMENT}({V}, {V}, {V}, {V}, f8, f8, f8)"),
     Export("kalman", "baro_height", f"{MEASUREMENT}({V}, {V}, f8, f8, f8)"),
-    Export("kalman", "mag_heading", f"{MEASUREMENT}({V}, {V}, {V}, f8, f8, f8)"),
+    Export("kalman", "mag_heading", f"{MEASUREMENT}({V}, {V}, {V}, {V}, f8, f8, f8)"),
     Export("kalman", "zupt", f"{MEASUREMENT}({V}, f8)"),
     Export("earth", "gravity", "f8(f8, f8)"),
     Export("earth", "radii", "UniTuple(f8, 2)(f8)"),

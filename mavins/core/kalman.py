@@ -402,17 +402,18 @@ def heading(s: np.ndarray, yaw_m: float, sigma: float) -> tuple[np.ndarray, np.n
 
 @kernel
 def mag_heading(
-    s: np.ndarray, m_b: np.ndarray, w_ib: np.ndarray, dt: float, declination: float, sigma: float
+    s: np.ndarray, cfg: np.ndarray, m_b: np.ndarray, w_ib: np.ndarray, dt: float, declination: float, sigma: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Heading from a calibrated magnetometer sample ``m_b`` (body FRD, any unit) taken dt (s) before the solution.
 
     The sample is first carried to the solution's time: a vector fixed in n
     seen in b obeys ``d(m_b)/dt = -w_nb x m_b`` (from the DCM differential
     equation ``dC_b^n/dt = C_b^n [w_nb x]``, attitude-equation notes, "DCM
-    differential equation"), so ``m_b(t) = m_b - dt (w_ib x m_b)`` with the
-    bias-corrected body rate ``w_ib`` (rad/s; Earth and transport rate, below
-    1e-4 rad/s, ignored). Without it a sample one 20 ms attitude interval old
-    in a 20 deg/s turn reads 0.4 deg off in heading.
+    differential equation"), so ``m_b(t) = m_b - dt (w_nb x m_b)`` with
+    ``w_nb = w_ib - C^T (w_ie + w_en)`` from the bias-corrected body rate
+    ``w_ib`` (rad/s) and the Earth and transport rates at the solution
+    (none in laboratory mode). Without it a sample one 20 ms attitude
+    interval old in a 20 deg/s turn reads 0.4 deg off in heading.
     It is then levelled with the full estimated attitude, ``m = C m_b``;
     the measurement is the angle of its horizontal part east of north, which
     must equal the declination (rad): ``nu = atan2(m_E, m_N) - declination``.
@@ -420,11 +421,19 @@ def mag_heading(
     which carries the coupling of tilt errors through the vertical field.
     sigma (rad) is the heading noise, about sensor noise / horizontal field.
     """
-    m_t = np.empty(3)
-    m_t[0] = m_b[0] - dt * (w_ib[1] * m_b[2] - w_ib[2] * m_b[1])
-    m_t[1] = m_b[1] - dt * (w_ib[2] * m_b[0] - w_ib[0] * m_b[2])
-    m_t[2] = m_b[2] - dt * (w_ib[0] * m_b[1] - w_ib[1] * m_b[0])
     c = s[sd.S_C : sd.S_C + 9].reshape(3, 3)
+    w = np.empty(3)
+    for i in range(3):
+        w[i] = w_ib[i]
+    if cfg[sd.CFG_EARTH] > 0.5:
+        lat, lon, h = sd.position(s, cfg, GEOGRAPHIC)
+        w_in = earth.earth_rate_n(lat) + earth.transport_rate(lat, h, s[sd.S_V : sd.S_V + 3])
+        for i in range(3):
+            w[i] -= c[0, i] * w_in[0] + c[1, i] * w_in[1] + c[2, i] * w_in[2]
+    m_t = np.empty(3)
+    m_t[0] = m_b[0] - dt * (w[1] * m_b[2] - w[2] * m_b[1])
+    m_t[1] = m_b[1] - dt * (w[2] * m_b[0] - w[0] * m_b[2])
+    m_t[2] = m_b[2] - dt * (w[0] * m_b[1] - w[1] * m_b[0])
     m = mat_vec(c, m_t)
     hh = m[0] * m[0] + m[1] * m[1]
     nu = np.empty(1)
