@@ -298,9 +298,11 @@ class Engine:
         taken on whichever sample it rides, the filter applies it at the update that passes its time."""
         t = smp.t
         if "mag" in self.cfg.filter.aiding and smp.mag is not None and t >= self._next_mag and any(smp.mag):
-            # a quarter of the interval early still counts: a magnetometer at exactly that rate, whose
-            # samples arrive 0.1 s apart give or take rounding and jitter, keeps every sample
-            self._next_mag = t + 0.75 * self.cfg.aiding_every_s
+            # on a grid of aiding_every_s (a denser magnetometer is used at that rate on average), with a
+            # quarter of the interval's slack: one at exactly that rate, whose samples arrive 0.1 s apart give
+            # or take rounding and jitter, keeps every sample; after a gap the grid restarts from t
+            every = self.cfg.aiding_every_s
+            self._next_mag = max(self._next_mag + every, t + 0.75 * every)
             self.filter.measure(self._s, self._kcfg, t, "mag", smp.mag)  # type: ignore[arg-type]
 
     def _zupt_from_sample(self, smp: ImuSample) -> None:

@@ -647,6 +647,18 @@ def test_a_magnetometer_sample_on_either_sample_of_an_update_is_used(on_update: 
     assert e.filter.counters["mag_accepted"] == 1
 
 
+def test_a_dense_magnetometer_is_used_at_ten_per_second():
+    """A magnetometer on every 10 ms sample: taken at t0, then at the first sample from t0 + 75 ms, then on the
+    0.1 s grid from there (t0 + 0.175, 0.275, ...): 11 in the first second (t0, 0.08, 0.18, ..., 0.98), where a
+    rule of 75 ms from the last one would take 13 and the old rule of 0.1 s from it, 10."""
+    e = aided(aiding=("mag",))
+    t = align(e, mag=False)
+    _, t = step(e, t, mag=False)
+    for k in range(100):
+        e.on_imu(rest(round(t + k * DT, 9), mag=True))
+    assert e.filter.counters["mag_accepted"] + len(e.filter._pending) == 11
+
+
 def test_the_next_magnetometer_sample_may_come_three_quarters_of_the_interval_later():
     """After one is taken at t, a sample at exactly t + 0.75 x 0.1 s is taken too, one just before it is not."""
     for dt_next, taken in ((0.75 * 0.1, 2), (0.75 * 0.1 - 1e-6, 1)):
