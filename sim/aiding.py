@@ -211,15 +211,19 @@ def magnetometer(run: "SimRun", config: MagConfig = MagConfig()) -> np.ndarray:
     """Magnetometer rows ``t, mx, my, mz`` (uT, FRD): ``C_n^b m^n + hard iron + noise``."""
     t = _epochs(run, config.rate)
     _, _, q, _ = truth_at(run, t)
-    m_n = config.field_n()
     rng = _rng(run, "mag")
     noise = config.sigma * rng.standard_normal((t.size, 3))
-    hard = np.asarray(config.hard_iron, dtype=np.float64)
     rows = np.empty((t.size, 4))
     rows[:, 0] = t
     for k in range(t.size):
-        rows[k, 1:4] = quat_to_dcm(q[k]).T @ m_n + hard + noise[k]
+        rows[k, 1:4] = body_field(q[k], config, noise[k])
     return rows
+
+
+def body_field(q: np.ndarray, config: MagConfig, noise: np.ndarray) -> np.ndarray:
+    """One magnetometer sample (uT, FRD) of an IMU with attitude quaternion ``q`` (C_b^n, scalar first):
+    ``C_n^b m^n + hard iron + noise`` (noise in uT, already drawn)."""
+    return quat_to_dcm(q).T @ config.field_n() + np.asarray(config.hard_iron, dtype=np.float64) + noise
 
 
 def mag_heading(m_b: Sequence[float], roll: float, pitch: float, declination: float) -> float:

@@ -18,7 +18,7 @@ time (``time_usec``/``time_boot_ms``):
 * with ``mag_rate`` > 0, the magnetometer in the first HIGHRES_IMU of each
   1/mag_rate (gauss, ``fields_updated`` bits 6-8 set, as PX4 marks a new
   magnetometer sample): the Earth field of sim.aiding.MagConfig seen by the
-  IMU plus its noise (sim.aiding.magnetometer's model, its own random stream).
+  IMU plus its noise (sim.aiding.body_field, its own random stream).
 
 Pacing: ``speed`` 1 = real time, X = X times faster, None = no pacing.
 """
@@ -35,11 +35,10 @@ from typing import Iterator
 import numpy as np
 
 from . import errors
-from .aiding import MagConfig
+from .aiding import MagConfig, body_field
 from .generate import SimRun
 from .trajectory import instant_rates
 
-from mavins.core.rotation import quat_to_dcm
 from mavins.link.mavlink import mavlink, mavutil
 
 G0 = 9.80665  # ArduPilot's mG scale (m/s^2 per 1000 mG)
@@ -110,7 +109,6 @@ def frames(run: SimRun, mav: mavlink.MAVLink, opts: StreamOptions) -> Iterator[t
     send_hb = _every(t, 1.0)
     send_mag = _every(t, opts.mag_rate) if opts.mag_rate > 0 and opts.msg == "highres" else np.zeros(len(t), bool)
     mag_rng = np.random.default_rng([opts.seed, 0x6E3])  # apart from the GPS/baro noise above
-    m_n = opts.mag.field_n()
     for i in range(len(t)):
         usec = int(round(t[i] * 1e6))
         out: list[mavlink.MAVLink_message] = []
@@ -122,9 +120,7 @@ def frames(run: SimRun, mav: mavlink.MAVLink, opts: StreamOptions) -> Iterator[t
             gyr = np.clip(np.round(w[i] / opts.raw_gyro_scale), -32768, 32767).astype(int)
             out.append(mav.raw_imu_encode(usec, *acc, *gyr, 0, 0, 0, 0, 0))
         elif send_mag[i]:
-            # the body sees C_n^b m^n (truth quaternion of the IMU at this sample), plus hard iron and noise
-            m_b = quat_to_dcm(truth[i, 10:14]).T @ m_n + np.asarray(opts.mag.hard_iron) \
-                + opts.mag.sigma * mag_rng.standard_normal(3)
+            m_b = body_field(truth[i, 10:14], opts.mag, opts.mag.sigma * mag_rng.standard_normal(3))
             out.append(mav.highres_imu_encode(usec, *f[i], *w[i], *(m_b * GAUSS_PER_UT), 0.0, 0.0, 0.0, 20.0,
                                               HIGHRES_ACC_GYRO | HIGHRES_MAG, 0))
         else:

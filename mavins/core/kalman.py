@@ -422,9 +422,7 @@ def mag_heading(
     sigma (rad) is the heading noise, about sensor noise / horizontal field.
     """
     c = s[sd.S_C : sd.S_C + 9].reshape(3, 3)
-    w = np.empty(3)
-    for i in range(3):
-        w[i] = w_ib[i]
+    w = w_ib.copy()
     if cfg[sd.CFG_EARTH] > 0.5:
         lat, lon, h = sd.position(s, cfg, GEOGRAPHIC)
         w_in = earth.earth_rate_n(lat) + earth.transport_rate(lat, h, s[sd.S_V : sd.S_V + 3])
