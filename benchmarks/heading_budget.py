@@ -53,7 +53,6 @@ from sim.aiding import MagConfig
 from mavins.core import earth
 from mavins.core import errmodel as em
 from mavins.core import kalman as kf
-from mavins.core import strapdown as sd
 from mavins.core.rotation import quat_to_dcm, skew
 
 TIMES = (35.0, 42.0, 46.0, 60.0, 70.0, 76.0, 90.0, 110.0)
@@ -80,8 +79,7 @@ def budget(spec: em.ImuSpec, setup: str, sigma_vel: float, mag_rate: float = 0.0
 
     ``mag_rate`` > 0 adds the simulator's magnetometer (sim.aiding.MagConfig:
     0.3 uT per axis in a 48 uT field at 63 deg inclination) from 1 s on at
-    that rate, as kalman.mag_heading with the heading noise sigma / H and the
-    considered tilt (kalman.MAG_FREE).
+    that rate, as kalman.mag_heading with the heading noise sigma / H.
     """
     t = bf.taf()
     ex = bf.trajectory().exact
@@ -101,8 +99,6 @@ def budget(spec: em.ImuSpec, setup: str, sigma_vel: float, mag_rate: float = 0.0
     mag = MagConfig()
     sig_mag = mag.sigma / (mag.strength * math.cos(math.radians(mag.inclination)))
     r_mag = np.array([[sig_mag ** 2]])
-    s_true = np.zeros(sd.S_SIZE)
-    lab = sd.make_config(earth_model="none")  # the sample is current (no carry): its Earth terms are not used
     out = []
     for k in range(1, ex.t.size // 2 + 1):
         i = 2 * k  # truth row after samples 2k-1 and 2k
@@ -130,9 +126,9 @@ def budget(spec: em.ImuSpec, setup: str, sigma_vel: float, mag_rate: float = 0.0
             kf.update(x, P, h_pos, zero3, r_pos, 0.0, kf.ALL)
             kf.update(x, P, h_vel, zero3, np.eye(3) * sigma_vel ** 2, 0.0, kf.ALL)
         if mag_rate > 0.0 and tk >= 1.0 - 1e-9 and abs(tk * mag_rate - round(tk * mag_rate)) < 1e-6:
-            s_true[sd.S_C:sd.S_C + 9] = c.ravel()
-            _, h_mag, _ = kf.mag_heading(s_true, lab, c.T @ mag.field_n(), zero3, 0.0, 0.0, sig_mag)
-            kf.update(x, P, h_mag, np.zeros(1), r_mag, 0.0, kf.MAG_FREE)
+            _, h_mag, _ = kf.mag_heading(mag.field_n(), math.radians(mag.declination),
+                                         math.tan(math.radians(mag.inclination)), sig_mag)
+            kf.update(x, P, h_mag, np.zeros(1), r_mag, 0.0, kf.ALL)
         bz = P[em.X_BG + 2, em.X_BG + 2] + P[em.X_GG + 2, em.X_GG + 2] + 2.0 * P[em.X_BG + 2, em.X_GG + 2]
         out.append((tk, math.degrees(math.sqrt(P[em.X_PHI + 2, em.X_PHI + 2])), math.degrees(math.sqrt(bz))))
     return np.array(out)

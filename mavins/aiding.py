@@ -84,6 +84,7 @@ class LiveFilter:
         self._w_ib = (0.0, 0.0, 0.0)  # body rate (rad/s) at the last attitude update, bias removed
         self._t_prev_k = 0.0
         self._T_k = 0.0  # s: the last attitude interval (velocity fixes are interpolated over it)
+        self._incl = (0.0, 0)  # sum and count of tan(inclination) of the accepted magnetometer samples
         self._bind(sd.GEOGRAPHIC)
 
     def _bind(self, frame: int) -> None:
@@ -120,6 +121,7 @@ class LiveFilter:
         self.sums[6] = sd.state_time(s)
         self._t_prev_k = sd.state_time(s)
         self._T_k = 0.0
+        self._incl = (0.0, 0)
         samples = int(cfg[sd.CFG_SAMPLES])
         self.predict_every = max(1, int(round(st.predict_dt / max(dt_sample * samples, 1e-6))))
         self._bind(sd.kernel_frame(cfg))
@@ -227,9 +229,12 @@ class LiveFilter:
                 self.last_hgt_t = t_m
         elif kind == "mag":
             (m_b,) = args
-            self._update(s, cfg, "mag", ("mag",), kalman.mag_heading(
-                s, cfg, np.asarray(m_b, dtype=float), np.array(self._w_ib), late, math.radians(self.settings.declination),
-                math.radians(self.settings.sigma_mag)))
+            m_n = kalman.mag_level(s, cfg, np.asarray(m_b, dtype=float), np.array(self._w_ib), late)
+            tan_i = kalman.mag_tan_inclination(m_n)
+            tan_used = tan_i if self._incl[1] == 0 else self._incl[0] / self._incl[1]
+            if self._update(s, cfg, "mag", ("mag",), kalman.mag_heading(
+                    m_n, math.radians(self.settings.declination), tan_used, math.radians(self.settings.sigma_mag))):
+                self._incl = (self._incl[0] + tan_i, self._incl[1] + 1)
         elif kind == "zupt":
             self._update(s, cfg, "zupt", ("vel",), kalman.zupt(s, self.settings.sigma_zupt))
 
@@ -237,8 +242,7 @@ class LiveFilter:
                 model: tuple[np.ndarray, np.ndarray, np.ndarray]) -> bool:
         """Apply one measurement model (nu, H, R) with the gate, count it, keep its test ratio."""
         nu, H, R = model
-        free = kalman.MAG_FREE if kind == "mag" else kalman.ALL
-        _, ratio, ok = kalman.apply_update(s, cfg, self.bias, self.P, H, nu, R, self.settings.gate, free)
+        _, ratio, ok = kalman.apply_update(s, cfg, self.bias, self.P, H, nu, R, self.settings.gate, kalman.ALL)
         self.counters[f"{kind}_{'accepted' if ok else 'rejected'}"] += 1
         for key in ratio_keys:
             self.ratios[key] = ratio * ratio

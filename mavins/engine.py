@@ -74,7 +74,7 @@ class EngineConfig:
     zupt_accel: float = 0.15  # m/s^2: ||f| - g| below this likewise
     zupt_still_s: float = 0.5  # s of still samples before zero-velocity updates start
     zupt_every_s: float = 0.1  # s between zero-velocity updates while still
-    aiding_every_s: float = 0.1  # s between magnetometer updates (a sample up to a quarter of it early is taken)
+    aiding_every_s: float = 0.02  # s between magnetometer updates (a sample up to a quarter of it early is taken)
 
 
 @dataclass
@@ -299,8 +299,8 @@ class Engine:
         t = smp.t
         if "mag" in self.cfg.filter.aiding and smp.mag is not None and t >= self._next_mag and any(smp.mag):
             # on a grid of aiding_every_s (a denser magnetometer is used at that rate on average), with a
-            # quarter of the interval's slack: one at exactly that rate, whose samples arrive 0.1 s apart give
-            # or take rounding and jitter, keeps every sample; after a gap the grid restarts from t
+            # quarter of the interval's slack: one at exactly that rate, whose samples arrive that far apart
+            # give or take rounding and jitter, keeps every sample; after a gap the grid restarts from t
             every = self.cfg.aiding_every_s
             self._next_mag = max(self._next_mag + every, t + 0.75 * every)
             self.filter.measure(self._s, self._kcfg, t, "mag", smp.mag)  # type: ignore[arg-type]

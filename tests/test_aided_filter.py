@@ -23,8 +23,9 @@ initial errors):
 * initial errors drawn from the filter's initial covariance: 3 m, 0.3 m/s,
   0.05 deg level, 3 deg yaw; the first 10 s at rest are used for ZUPT and
   ZARU;
-* a second set-up adds the simulator's magnetometer (10 Hz, 0.3 uT per
-  axis, calibrated) and is held to the same bands.
+* a second set-up adds the simulator's magnetometer (50 Hz, the live
+  path's rate, 0.3 uT per axis, calibrated) and is held to the same bands,
+  and to the issue's 0.1 deg on heading too.
 
 Why the small initial level sigma and the rest period: the consumer part's
 turn-on biases (8 mg, 0.33 deg/s, 1-sigma) are large. A level error that the
@@ -168,7 +169,7 @@ BIAS_SUM[3:6, em.X_BA : em.X_BA + 3] = np.eye(3)
 BIAS_SUM[3:6, em.X_GA : em.X_GA + 3] = np.eye(3)
 
 
-MAG = aiding.MagConfig()  # 10 Hz (the live path's magnetometer rate), 0.3 uT, calibrated
+MAG = aiding.MagConfig(rate=50.0)  # the live path's magnetometer rate (docs/filter.md), 0.3 uT, calibrated
 MAG_SIGMA_YAW = MAG.sigma / (MAG.strength * math.cos(math.radians(MAG.inclination)))  # rad per sample
 
 
@@ -245,17 +246,30 @@ def test_monte_carlo_nees(either_mc, block: str) -> None:
 def test_monte_carlo_accuracy(either_mc) -> None:
     """After the first 60 s: horizontal position RMS below 0.5 m, level attitude RMS below 0.1 deg.
 
-    The heading is not held to 0.1 deg: without a magnetometer it is
+    The heading is held to 0.1 deg with the magnetometer only
+    (test_monte_carlo_heading_with_magnetometer): without one it is
     observable only in the turns and accelerations and drifts with the z
-    gyro's bias instability (16 deg/h) in between; with one, the magnetometer
-    sees heading plus tan(63 deg) ~ 2 times the tilt about magnetic north,
-    whose 1-sigma is about 0.05 deg (docs/filter.md "Limits"). Its
+    gyro's bias instability (16 deg/h) in between, 0.33 deg by the
+    covariance along the true trajectory (docs/filter.md "Limits"). Its
     consistency is part of the attitude NEES.
     """
     late = either_mc["t"] >= 60.0
     err = np.array(either_mc["err"])[:, late]
     assert math.sqrt(np.mean(np.sum(err[:, :, 6:8] ** 2, axis=2))) < 0.5
     assert np.degrees(math.sqrt(np.mean(np.sum(err[:, :, 0:2] ** 2, axis=2)))) < 0.1
+
+
+def test_monte_carlo_heading_with_magnetometer(monte_carlo_mag) -> None:
+    """With the 50 Hz magnetometer the heading RMS after the first 60 s is below the issue's 0.1 deg.
+
+    The bound is the issue's; the covariance along the true trajectory gives
+    0.09 deg for this set-up (benchmarks/heading_budget.py): the
+    magnetometer sees heading plus tan(63 deg) ~ 2 times the tilt about
+    magnetic north, which is known to about 0.05 deg.
+    """
+    late = monte_carlo_mag["t"] >= 60.0
+    err = np.array(monte_carlo_mag["err"])[:, late]
+    assert np.degrees(math.sqrt(np.mean(err[:, :, 2] ** 2))) < 0.1
 
 
 def test_monte_carlo_biases_at_the_end(monte_carlo) -> None:
@@ -425,7 +439,8 @@ def test_zupt_zaru_and_magnetometer_at_rest(static_run) -> None:
     assert rows[-1, 31] ** 2 <= g.random_walk**2 / last + walk * last / 3.0 + walk * (rows[-1, 0] - 59.9)
     assert abs(rows[-1, 25] - bg[idx[-1], 2]) < 3.0 * rows[-1, 31]
     assert abs(err[-1, 2]) < 3.0 * rows[-1, 22]
-    _, H, _ = kf.mag_heading(st["state"], sd.make_config(), mag[-1, 1:4], np.zeros(3), 0.0, math.radians(mag_cfg.declination), sig_yaw)
+    m_n = kf.mag_level(st["state"], sd.make_config(), mag[-1, 1:4], np.zeros(3), 0.0)
+    _, H, _ = kf.mag_heading(m_n, math.radians(mag_cfg.declination), kf.mag_tan_inclination(m_n), sig_yaw)
     h = H[0, 0:3]
     assert np.hypot(h[0], h[1]) == pytest.approx(math.tan(math.radians(mag_cfg.inclination)), rel=0.02)
     sig_z = math.sqrt(h @ st["P"][0:3, 0:3] @ h)
@@ -676,7 +691,7 @@ def test_measurement_models_linearise_the_measurement(which: str) -> None:
         m_b = c_true.T @ m_n
 
         def measure(s):
-            return kf.mag_heading(s, CFG, m_b, np.zeros(3), 0.0, 0.05, 0.01)
+            return kf.mag_heading(kf.mag_level(s, CFG, m_b, np.zeros(3), 0.0), 0.05, math.tan(1.1), 0.01)
         tol = 2e-5
     else:
         def measure(s):

@@ -610,6 +610,25 @@ def test_partial_rows_are_not_used() -> None:
     assert c.sum() == 0 and len(log) == 0
 
 
+@pytest.mark.parametrize("first", ["none", "accepted", "rejected"])
+def test_magnetometer_h_takes_the_inclination_of_the_samples_before(first: str) -> None:
+    """kalman.mag_heading's tilt terms use the mean tan(inclination) of the accepted samples before this one, its
+    own only for the first. Level at rest, yaw 0, P = diag(phi_N 0.01, 0, 0, ...), declination 0: H_N = -tan I,
+    S = tan^2 I * 0.01 + R. The second sample [cos 0.1, -sin 0.1, 3] (tan I 3, nu -0.1, sigma 0.1) gives
+    NIS 0.01 / (0.09 + 0.01) = 0.1 with its own tan I, and 0.01 / (0.01 + 0.01) = 0.5 after an accepted first
+    sample of tan I 1 (sigma 1000 rad: it changes nothing else); a first sample the gate rejects (2 rad off,
+    sigma 0.01) does not count."""
+    second = [0.05, math.cos(0.1), -math.sin(0.1), 3.0, 0.1]
+    firsts = {"none": [], "accepted": [[0.03, math.cos(0.1), -math.sin(0.1), 1.0, 1000.0]],
+              "rejected": [[0.03, math.cos(2.0), -math.sin(2.0), 1.0, 0.01]]}
+    P = np.zeros((em.NX, em.NX))
+    P[0, 0] = 0.01
+    _, _, _, _, c, log = run_direct(imu(wz=0.0), P=P, mag=firsts[first] + [second])
+    assert c[aided.K_MAG, 1] == (1 if first == "rejected" else 0)
+    assert log[-1, 0] == 0.05 and log[-1, 4] == 1.0
+    assert log[-1, 2] == pytest.approx(0.5 if first == "accepted" else 0.1, rel=1e-6)
+
+
 def test_log_rows_of_every_kind() -> None:
     """Each measurement's log row: t (its own, or the update's for ZUPT/ZARU), kind, NIS, dof, accepted, ratio
     (NIS and ratio worked by hand: P 1, R 1, nu 1 per measured axis; gate 5)."""

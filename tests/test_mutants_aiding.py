@@ -630,9 +630,9 @@ def test_baro_by_hand() -> None:
 
 def test_magnetometer_heading_by_hand() -> None:
     """Level, yaw estimate 0, declination 3 deg east, a horizontal field 7 deg east of the body's x axis: the true
-    yaw is -4 deg; P_yaw = R = (2 deg)^2 moves the yaw half way, to -2 deg. The heading's correlations with the
-    gyro-bias parts are corrected (P_xy / S nu), those with velocity and accelerometer bias only considered
-    (docs/filter.md: a magnetometer corrects heading and gyro biases only). Ratio (4/sqrt(8)/5)^2 = 0.08."""
+    yaw is -4 deg; P_yaw = R = (2 deg)^2 moves the yaw half way, to -2 deg. Every state correlated with the
+    heading is corrected by P_xy / S nu: the gyro-bias parts (P_xy = r / 4), velocity and accelerometer bias
+    (P_xy = r / 400). Ratio (4/sqrt(8)/5)^2 = 0.08."""
     s = state()
     r = (2.0 * DEG) ** 2
     f = live(s, p={2: r, em.X_DV: 1.0, em.X_BG + 2: r, em.X_GG + 2: r, em.X_BA: 1.0},
@@ -645,13 +645,37 @@ def test_magnetometer_heading_by_hand() -> None:
     assert yaw(s) == pytest.approx(-2.0 * DEG, rel=1e-12)
     assert f.bias[kf.B_BG + 2] == pytest.approx(-c / (2 * r) * nu, rel=1e-12)
     assert f.bias[kf.B_GG + 2] == pytest.approx(-c / (2 * r) * nu, rel=1e-12)
-    np.testing.assert_array_equal(velocity(s), 0.0)
-    assert f.bias[kf.B_BA] == 0.0
+    np.testing.assert_allclose(velocity(s), [-0.01 * c / (2 * r) * nu, 0.0, 0.0], rtol=1e-12, atol=0)
+    assert f.bias[kf.B_BA] == pytest.approx(-0.01 * c / (2 * r) * nu, rel=1e-12)
     assert f.counters == {"mag_accepted": 1} and f.ratios == pytest.approx({"mag": 0.08}, rel=1e-12)
     u = f.uncertainty(T0, 0)
     assert u.mag_ratio == pytest.approx(0.08, rel=1e-12) and not u.abs_pos and not u.abs_hgt
     f.measure(s, CFG, T0, "mag", (0.0, 1.0, 0.0))  # 85 deg off, S = 1.5 R: rejected
     assert f.counters["mag_rejected"] == 1
+
+
+@pytest.mark.parametrize("first", [False, True])
+def test_magnetometer_h_takes_the_inclination_of_the_samples_before(first: bool) -> None:
+    """The live filter keeps the mean tan(inclination) of its accepted samples for kalman.mag_heading's tilt terms
+    (its own for the first sample). Level, yaw 0, declination 0, P = diag(phi_N 0.01), sigma_mag 0.1 rad:
+    H_N = -tan I. A first sample [1, 0, 1] (tan I 1, nu 0) leaves the state and takes P to 0.01 - 0.01^2 /
+    0.02 = 0.005; the next [cos 0.1, -sin 0.1, 3] (tan I 3, nu -0.1) then has S = 1 * 0.005 + 0.01 and
+    NIS 0.01 / 0.015 (with its own tan I it would be 0.01 / 0.055); alone, S = 9 * 0.01 + 0.01 and NIS 0.1.
+    The ratio kept is NIS / gate^2 (gate 5)."""
+    s = state()
+    f = live(s, p={0: 0.01}, declination=0.0, sigma_mag=math.degrees(0.1))
+    if first:
+        f.measure(s, CFG, T0, "mag", (1.0, 0.0, 1.0))
+        assert f.P[0, 0] == pytest.approx(0.005, rel=1e-12) and yaw(s) == 0.0
+    f.measure(s, CFG, T0, "mag", (math.cos(0.1), -math.sin(0.1), 3.0))
+    assert f.counters == {"mag_accepted": 2 if first else 1}
+    assert f.ratios["mag"] == pytest.approx((0.01 / 0.015 if first else 0.1) / 25.0, rel=1e-12)
+    s = state()
+    f.start(s, CFG, np.zeros(3), 0.01)  # a restart forgets the inclination
+    f.P[:] = 0.0
+    f.P[0, 0] = 0.01
+    f.measure(s, CFG, T0, "mag", (math.cos(0.1), -math.sin(0.1), 3.0))
+    assert f.ratios["mag"] == pytest.approx(0.1 / 25.0, rel=1e-12)
 
 
 @pytest.mark.parametrize("late", [0.01, 0.0])

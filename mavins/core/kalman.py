@@ -62,17 +62,6 @@ from .jit import kernel
 from .rotation import mat3_mul_s, mat_vec, quat_mul_s, quat_to_dcm_s, rotvec_to_dcm_s, rotvec_to_quat_s, skew, wrap_pi
 
 ALL = np.ones(NX)  # update(): every state may be corrected
-# A magnetometer heading corrects the heading and the gyro biases only: its tilt
-# terms (tan(I) times the tilt about magnetic north) stay in H, so the tilt's
-# uncertainty counts, but the tilt and the accelerometer biases are "considered",
-# not corrected. Corrected, the magnetometer moved the tilt along the direction
-# zero-velocity updates cannot see (tilt against accelerometer bias): at rest
-# with ideal data the east tilt walked 3.9 deg in 5 min while its 1-sigma
-# shrank to 0.18 deg (docs/filter.md).
-MAG_FREE = np.zeros(NX)
-MAG_FREE[X_PHI + 2] = 1.0
-MAG_FREE[X_BG : X_BG + 3] = 1.0
-MAG_FREE[X_GG : X_GG + 3] = 1.0
 
 B_BG = 0
 B_BA = 3
@@ -401,25 +390,17 @@ def heading(s: np.ndarray, yaw_m: float, sigma: float) -> tuple[np.ndarray, np.n
 
 
 @kernel
-def mag_heading(
-    s: np.ndarray, cfg: np.ndarray, m_b: np.ndarray, w_ib: np.ndarray, dt: float, declination: float, sigma: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Heading from a calibrated magnetometer sample ``m_b`` (body FRD, any unit) taken dt (s) before the solution.
+def mag_level(s: np.ndarray, cfg: np.ndarray, m_b: np.ndarray, w_ib: np.ndarray, dt: float) -> np.ndarray:
+    """A calibrated magnetometer sample ``m_b`` (body FRD, any unit) taken dt (s) before the solution,
+    carried to the solution's time and levelled with the estimated attitude (NED, same unit).
 
-    The sample is first carried to the solution's time: a vector fixed in n
-    seen in b obeys ``d(m_b)/dt = -w_nb x m_b`` (from the DCM differential
-    equation ``dC_b^n/dt = C_b^n [w_nb x]``, attitude-equation notes, "DCM
-    differential equation"), so ``m_b(t) = m_b - dt (w_nb x m_b)`` with
-    ``w_nb = w_ib - C^T (w_ie + w_en)`` from the bias-corrected body rate
-    ``w_ib`` (rad/s) and the Earth and transport rates at the solution
-    (none in laboratory mode). Without it a sample one 20 ms attitude
-    interval old in a 20 deg/s turn reads 0.4 deg off in heading.
-    It is then levelled with the full estimated attitude, ``m = C m_b``;
-    the measurement is the angle of its horizontal part east of north, which
-    must equal the declination (rad): ``nu = atan2(m_E, m_N) - declination``.
-    With ``m(est) = m + phi x m``, ``H_phi = -(1/|m_h|^2) [-m_E, m_N, 0] [m x]``,
-    which carries the coupling of tilt errors through the vertical field.
-    sigma (rad) is the heading noise, about sensor noise / horizontal field.
+    A vector fixed in n seen in b obeys ``d(m_b)/dt = -w_nb x m_b`` (from the
+    DCM differential equation ``dC_b^n/dt = C_b^n [w_nb x]``, attitude-equation
+    notes, "DCM differential equation"), so ``m_b(t) = m_b - dt (w_nb x m_b)``
+    with ``w_nb = w_ib - C^T (w_ie + w_en)`` from the bias-corrected body rate
+    ``w_ib`` (rad/s) and the Earth and transport rates at the solution (none in
+    laboratory mode). Without it a sample one 20 ms attitude interval old in a
+    20 deg/s turn reads 0.4 deg off in heading. Then ``m = C m_b``.
     """
     c = s[sd.S_C : sd.S_C + 9].reshape(3, 3)
     w = w_ib.copy()
@@ -432,17 +413,44 @@ def mag_heading(
     m_t[0] = m_b[0] - dt * (w[1] * m_b[2] - w[2] * m_b[1])
     m_t[1] = m_b[1] - dt * (w[2] * m_b[0] - w[0] * m_b[2])
     m_t[2] = m_b[2] - dt * (w[0] * m_b[1] - w[1] * m_b[0])
-    m = mat_vec(c, m_t)
-    hh = m[0] * m[0] + m[1] * m[1]
+    return mat_vec(c, m_t)
+
+
+@kernel
+def mag_tan_inclination(m: np.ndarray) -> float:
+    """tan(I) of a levelled field sample m (NED): its down part over its horizontal part."""
+    return m[2] / np.sqrt(m[0] * m[0] + m[1] * m[1])
+
+
+@kernel
+def mag_heading(
+    m: np.ndarray, declination: float, tan_incl: float, sigma: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Heading from a levelled magnetometer sample m (NED, :func:`mag_level`).
+
+    The measurement is the angle of the field's horizontal part east of
+    north, which must equal the declination D (rad): ``nu = atan2(m_E, m_N) - D``.
+    With ``m(est) = m + phi x m``, ``d nu = -(1/|m_h|^2) [-m_E, m_N, 0] [m x] phi``;
+    taken at the field the model predicts (declination D, inclination I,
+    tan_incl = tan I), ``H_phi = [-tan(I) cos D, -tan(I) sin D, 1]``: the tilt
+    about magnetic north couples through the vertical field. H must not come
+    from the sample itself. Along the sample's own horizontal direction, H's
+    east part carries the sample's noise across the field, the innovation's
+    own noise, and their product has the mean ``tan(I) sigma^2 / |m_h|^2``: it
+    walked the east tilt one way (50 Hz over the consumer flight:
+    normalised-error RMS 2.9). With the sample's own tan I, every sample
+    measures a slightly different combination of heading and tilt, and the
+    filter tells the two apart from noise (docs/filter.md "Magnetometer").
+    Callers pass the mean tan I of the accepted samples before this one
+    (:func:`mag_tan_inclination`). sigma (rad) is the heading noise, about
+    sensor noise / horizontal field.
+    """
     nu = np.empty(1)
     nu[0] = wrap_pi(np.arctan2(m[1], m[0]) - declination)
-    g0 = -m[1] / hh
-    g1 = m[0] / hh
-    # H_phi = -g^T [m x] with g = [g0, g1, 0]; g^T [m x] = [g1 m2, -g0 m2, g0 m1 - g1 m0]
     H = np.zeros((1, NX))
-    H[0, X_PHI] = -(g1 * m[2])
-    H[0, X_PHI + 1] = -(-g0 * m[2])
-    H[0, X_PHI + 2] = -(g0 * m[1] - g1 * m[0])
+    H[0, X_PHI] = -tan_incl * np.cos(declination)
+    H[0, X_PHI + 1] = -tan_incl * np.sin(declination)
+    H[0, X_PHI + 2] = 1.0
     R = np.zeros((1, 1))
     R[0, 0] = sigma * sigma
     return nu, H, R
