@@ -702,7 +702,7 @@ def compile_notes() -> tuple[list[str], list[dict]]:
 def mc_run(seed: int, mag_rate: float = 0.0) -> dict[str, Any]:
     """One Monte Carlo run of the tests' set-up: NEES per 1 Hz epoch, normalised errors, NIS, accuracy sums.
 
-    ``mag_rate`` > 0 adds the simulator's magnetometer at that rate (Hz), as the tests' second set-up (10 Hz)."""
+    ``mag_rate`` > 0 adds the simulator's magnetometer at that rate (Hz), as the tests' second set-up (50 Hz)."""
     from mavins.core import aided
 
     t = taf()
@@ -825,8 +825,8 @@ def main(argv: Sequence[str] = ()) -> list[dict]:
     p.add_argument("--compare-first", type=int, default=SEED0,
                    help=f"first seed of the pyins comparison (default {SEED0})")
     p.add_argument("--runs", type=int, default=None, help="Monte Carlo runs (default 50)")
-    p.add_argument("--mag-rate", type=float, default=10.0,
-                   help="magnetometer rate (Hz) of the Monte Carlo's second set-up (default 10, the live path's)")
+    p.add_argument("--mag-rate", type=float, default=50.0,
+                   help="magnetometer rate (Hz) of the Monte Carlo's second set-up (default 50, the live path's)")
     p.add_argument("--jobs", type=int, default=None, help="worker processes for the Monte Carlo (default: all cores)")
     p.add_argument("--live-seconds", type=float, default=None, help="sensor seconds of the 1 kHz live record (60)")
     p.add_argument("--service-seconds", type=float, default=None,

@@ -156,7 +156,7 @@ def compare(collected: Collected, truth: np.ndarray) -> dict[str, object]:
 PREWARM_WAIT_S = 600.0  # s: the longest the demo waits for the compiling process before it compiles itself
 
 
-MAG_RATE = 10.0  # Hz: the simulated magnetometer in HIGHRES_IMU when the demo aids with it
+MAG_RATE = 50.0  # Hz: the simulated magnetometer in HIGHRES_IMU when the demo aids with it (the live path's rate)
 
 
 def _engine_config(lat: float, lon: float, alt: float, heading: str, grade: str,

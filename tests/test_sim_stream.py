@@ -460,7 +460,7 @@ def test_highres_imu_carries_the_magnetometer_at_its_rate(moving: SimRun) -> Non
 def test_the_service_aids_with_the_streamed_magnetometer() -> None:
     """The streamed magnetometer reaches the live filter: a Pipeline (ingest, engine and filter, as `mavins run`
     builds it) fed the decoded stream of the flight's first 4 s (at rest) with --aiding mag applies every
-    streamed sample (10 Hz, the live path's magnetometer rate) after navigation starts (the first solution;
+    streamed sample (10 Hz: each one is on the live path's 20 ms grid) after navigation starts (the first solution;
     the one at that instant may come before the filter does), all accepted; without mag_rate none."""
     from mavins.aiding import FilterSettings
     from mavins.engine import EngineConfig
