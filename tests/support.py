@@ -379,3 +379,16 @@ class ServiceProcess:
         assert self.proc.returncode == 0 and "Traceback" not in log, log
         nav = np.loadtxt(self.nav_path, delimiter=",", skiprows=1, ndmin=2)
         return RunResult(log, summary(log), nav)
+
+
+def mag_by_hand(tans: list[float], p0: float, r: float, nu: float) -> tuple[float, float]:
+    """Scalar Kalman algebra of the north tilt under heading samples at declination 0 (H_N = -tan I, the other
+    states uncorrelated): samples of tan I ``tans[:-1]`` with nu = 0, each H from the mean of those before (its
+    own for the first), then one with innovation nu. Returns (its NIS, its north-tilt correction x_N)."""
+    p = p0
+    for k, _ in enumerate(tans[:-1]):
+        h = tans[0] if k == 0 else sum(tans[:k]) / k
+        p -= p * p * h * h / (h * h * p + r)
+    h = -(sum(tans[:-1]) / (len(tans) - 1) if len(tans) > 1 else tans[-1])
+    S = h * h * p + r
+    return nu * nu / S, p * h * nu / S

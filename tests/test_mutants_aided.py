@@ -21,7 +21,7 @@ from mavins.core import aided
 from mavins.core import errmodel as em
 from mavins.core import kalman as kf
 from mavins.core import strapdown as sd
-from support import A, E2, gamma
+from support import A, E2, gamma, mag_by_hand
 
 LAT0, LON0, H0 = 45.0, 7.0, 100.0  # deg, deg, m
 DT = 0.01
@@ -610,23 +610,41 @@ def test_partial_rows_are_not_used() -> None:
     assert c.sum() == 0 and len(log) == 0
 
 
-@pytest.mark.parametrize("first", ["none", "accepted", "rejected"])
-def test_magnetometer_h_takes_the_inclination_of_the_samples_before(first: str) -> None:
+def test_a_late_magnetometer_sample_is_carried_to_the_update() -> None:
+    """The body turns at 0.5 rad/s about z (laboratory mode, level); a sample stamped 0.025 s, between the updates
+    at 0.02 and 0.03 s, sees the field [1, 0, 1] (declination 0) from the attitude of its own time, Rz(0.5 *
+    0.025). Applied at 0.03 s it is carried back over 5 ms (kalman.mag_level): what is left is the first-order
+    carry's (0.5 * 0.005)^2 / 2 rad, NIS below 1e-9 with P_yaw 0.01 and sigma 0.1. Carried over t_k + t_m
+    (55 ms), or uncarried, it would be off by 0.5 * 0.05 or 0.5 * 0.005 rad: NIS 0.03 or 3e-4."""
+    yaw_m = 0.5 * 0.025
+    P = np.zeros((em.NX, em.NX))
+    P[2, 2] = 0.01
+    mag = [[0.025, math.cos(yaw_m), -math.sin(yaw_m), 1.0, 0.1]]
+    _, _, _, _, c, log = run_direct(imu(wz=0.5), P=P, mag=mag)
+    assert c[aided.K_MAG, 0] == 1 and log[0, 0] == 0.025
+    assert log[0, 2] < 1e-9
+
+
+@pytest.mark.parametrize("before", ["none", "accepted", "rejected"])
+def test_magnetometer_h_takes_the_inclination_of_the_samples_before(before: str) -> None:
     """kalman.mag_heading's tilt terms use the mean tan(inclination) of the accepted samples before this one, its
-    own only for the first. Level at rest, yaw 0, P = diag(phi_N 0.01, 0, 0, ...), declination 0: H_N = -tan I,
-    S = tan^2 I * 0.01 + R. The second sample [cos 0.1, -sin 0.1, 3] (tan I 3, nu -0.1, sigma 0.1) gives
-    NIS 0.01 / (0.09 + 0.01) = 0.1 with its own tan I, and 0.01 / (0.01 + 0.01) = 0.5 after an accepted first
-    sample of tan I 1 (sigma 1000 rad: it changes nothing else); a first sample the gate rejects (2 rad off,
-    sigma 0.01) does not count."""
-    second = [0.05, math.cos(0.1), -math.sin(0.1), 3.0, 0.1]
-    firsts = {"none": [], "accepted": [[0.03, math.cos(0.1), -math.sin(0.1), 1.0, 1000.0]],
+    own only for the first. Level at rest, yaw 0, P = diag(phi_N 0.01), declination 0, sigma 0.1 rad: H_N =
+    -tan I. Two samples [1, 0, 2] and [1, 0, 0.5] (tan I 2 and 0.5, nu 0: the state stays; the second uses
+    2) before [cos 0.1, -sin 0.1, 3] (tan I 3, nu -0.1), which then uses 1.25; alone, or after a sample the
+    gate rejects (2 rad off, sigma 0.01), it uses its own 3. Its NIS and the roll it leaves (-x_N) as the
+    scalar Kalman algebra gives it (support.mag_by_hand)."""
+    last = [0.05, math.cos(0.1), -math.sin(0.1), 3.0, 0.1]
+    firsts = {"none": [], "accepted": [[0.03, 1.0, 0.0, 2.0, 0.1], [0.04, 1.0, 0.0, 0.5, 0.1]],
               "rejected": [[0.03, math.cos(2.0), -math.sin(2.0), 1.0, 0.01]]}
     P = np.zeros((em.NX, em.NX))
     P[0, 0] = 0.01
-    _, _, _, _, c, log = run_direct(imu(wz=0.0), P=P, mag=firsts[first] + [second])
-    assert c[aided.K_MAG, 1] == (1 if first == "rejected" else 0)
+    s, _, _, _, c, log = run_direct(imu(wz=0.0), P=P, mag=firsts[before] + [last])
+    assert c[aided.K_MAG, 1] == (1 if before == "rejected" else 0)
     assert log[-1, 0] == 0.05 and log[-1, 4] == 1.0
-    assert log[-1, 2] == pytest.approx(0.5 if first == "accepted" else 0.1, rel=1e-6)
+    nis, x_n = mag_by_hand(([2.0, 0.5] if before == "accepted" else []) + [3.0], 0.01, 0.01, -0.1)
+    assert log[-1, 2] == pytest.approx(nis, rel=1e-9)
+    cnb = s[sd.S_C : sd.S_C + 9].reshape(3, 3)
+    assert math.atan2(cnb[2, 1], cnb[2, 2]) == pytest.approx(-x_n, rel=1e-9)
 
 
 def test_log_rows_of_every_kind() -> None:

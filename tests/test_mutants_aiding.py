@@ -25,6 +25,7 @@ from mavins.core import errmodel as em
 from mavins.core import kalman as kf
 from mavins.core import strapdown as sd
 from mavins.core.runner import initial_state
+from support import mag_by_hand
 from support import A, E2, OMEGA, gamma
 
 DEG = math.pi / 180.0
@@ -654,28 +655,32 @@ def test_magnetometer_heading_by_hand() -> None:
     assert f.counters["mag_rejected"] == 1
 
 
-@pytest.mark.parametrize("first", [False, True])
-def test_magnetometer_h_takes_the_inclination_of_the_samples_before(first: bool) -> None:
+@pytest.mark.parametrize("before", [0, 2])
+def test_magnetometer_h_takes_the_inclination_of_the_samples_before(before: int) -> None:
     """The live filter keeps the mean tan(inclination) of its accepted samples for kalman.mag_heading's tilt terms
     (its own for the first sample). Level, yaw 0, declination 0, P = diag(phi_N 0.01), sigma_mag 0.1 rad:
-    H_N = -tan I. A first sample [1, 0, 1] (tan I 1, nu 0) leaves the state and takes P to 0.01 - 0.01^2 /
-    0.02 = 0.005; the next [cos 0.1, -sin 0.1, 3] (tan I 3, nu -0.1) then has S = 1 * 0.005 + 0.01 and
-    NIS 0.01 / 0.015 (with its own tan I it would be 0.01 / 0.055); alone, S = 9 * 0.01 + 0.01 and NIS 0.1.
-    The ratio kept is NIS / gate^2 (gate 5)."""
+    H_N = -tan I. Samples [1, 0, 2] and [1, 0, 0.5] (tan I 2 and 0.5, nu 0: the state stays) before
+    [cos 0.1, -sin 0.1, 3] (tan I 3, nu -0.1), which then uses tan I 1.25; alone it uses its own 3. Its NIS
+    and the roll it leaves (-x_N: C <- exp(-[x x]) C) as the scalar algebra gives (_mag_by_hand); the ratio
+    kept is NIS / gate^2 (gate 5). A restart forgets the inclination."""
     s = state()
     f = live(s, p={0: 0.01}, declination=0.0, sigma_mag=math.degrees(0.1))
-    if first:
-        f.measure(s, CFG, T0, "mag", (1.0, 0.0, 1.0))
-        assert f.P[0, 0] == pytest.approx(0.005, rel=1e-12) and yaw(s) == 0.0
+    tans = [2.0, 0.5][:before] + [3.0]
+    for tan_i in tans[:-1]:
+        f.measure(s, CFG, T0, "mag", (1.0, 0.0, tan_i))
+    assert yaw(s) == 0.0
     f.measure(s, CFG, T0, "mag", (math.cos(0.1), -math.sin(0.1), 3.0))
-    assert f.counters == {"mag_accepted": 2 if first else 1}
-    assert f.ratios["mag"] == pytest.approx((0.01 / 0.015 if first else 0.1) / 25.0, rel=1e-12)
+    nis, x_n = mag_by_hand(tans, 0.01, 0.01, -0.1)
+    assert f.counters == {"mag_accepted": len(tans)}
+    assert f.ratios["mag"] == pytest.approx(nis / 25.0, rel=1e-12)
+    c = s[sd.S_C : sd.S_C + 9].reshape(3, 3)
+    assert math.atan2(c[2, 1], c[2, 2]) == pytest.approx(-x_n, rel=1e-9)
     s = state()
-    f.start(s, CFG, np.zeros(3), 0.01)  # a restart forgets the inclination
+    f.start(s, CFG, np.zeros(3), 0.01)
     f.P[:] = 0.0
     f.P[0, 0] = 0.01
     f.measure(s, CFG, T0, "mag", (math.cos(0.1), -math.sin(0.1), 3.0))
-    assert f.ratios["mag"] == pytest.approx(0.1 / 25.0, rel=1e-12)
+    assert f.ratios["mag"] == pytest.approx(mag_by_hand([3.0], 0.01, 0.01, -0.1)[0] / 25.0, rel=1e-12)
 
 
 @pytest.mark.parametrize("late", [0.01, 0.0])
