@@ -788,7 +788,9 @@ def _add_demo(sub: argparse._SubParsersAction) -> None:
                    "publishes, record everything to Rerun and print the errors against the simulator's truth.")
     p.add_argument("--scenario", default="flight", help="built-in scenario or .toml path")
     p.add_argument("--duration", type=_real(**POSITIVE), default=120.0, metavar="S", help="simulated seconds")
-    p.add_argument("--speed", type=_Speed(), default="5", metavar="X|max", help="pace: 1 = real time")
+    p.add_argument("--speed", type=_Speed(), default="5", metavar="X|max",
+                   help="pace: 1 = real time; max = as fast as the service takes the messages (the stream waits "
+                        "while more than 100 of them are not yet taken, so that none is lost)")
     p.add_argument("--grade", default="industrial", choices=("ideal", "consumer", "industrial", "tactical", "navigation"))
     p.add_argument("--heading", type=_Heading(), default="vehicle", metavar="DEG|SOURCE",
                    help="heading source for the alignment")

@@ -20,6 +20,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -100,11 +101,13 @@ class DemoReport:
     pos_err_m_rms: float = math.nan
     pos_err_m_max: float = math.nan
     within_3_sigma: tuple[int, int] = (0, 0)  # (north/east errors inside 3 sigma, errors compared)
+    sent: int = 0  # messages the simulator streamed
 
     def lines(self) -> list[str]:
         inside, total = self.within_3_sigma
         share = f"{inside}/{total} ({100.0 * inside / total:.1f} %)" if total else "none compared"
         return [
+            f"messages streamed / taken by the service: {self.sent} / {self.summary.messages}",
             f"published output sets received: {self.outputs}",
             f"attitude error vs truth: RMS {self.att_err_deg_rms:.4f} deg, max {self.att_err_deg_max:.4f} deg, "
             f"final {self.att_err_deg_final:.4f} deg",
@@ -157,6 +160,33 @@ PREWARM_WAIT_S = 600.0  # s: the longest the demo waits for the compiling proces
 
 
 MAG_RATE = 50.0  # Hz: the simulated magnetometer in HIGHRES_IMU when the demo aids with it (the live path's rate)
+MAX_IN_FLIGHT = 100  # messages streamed and not yet taken by the service at --speed max
+MAX_STALL_S = 5.0  # s: how long --speed max waits for a service that takes nothing, before going on
+
+
+class KeepUp:
+    """``--speed max`` without losing data: hold the stream while more than MAX_IN_FLIGHT of its messages
+    wait for the service. A UDP socket's buffer holds a few hundred datagrams and the kernel drops what
+    overflows it; the demo then lost samples at the start, whose gaps restarted the alignment into the
+    take-off (position errors of hundreds of metres). A service that takes nothing for MAX_STALL_S is
+    assumed to have lost what is missing, and the stream goes on."""
+
+    def __init__(self, taken: Callable[[], int], stop: threading.Event) -> None:
+        self.taken = taken  # messages the service has taken so far
+        self.stop = stop
+        self.lost = 0
+
+    def __call__(self, sent: int) -> None:
+        last = self.taken()
+        t_end = time.monotonic() + MAX_STALL_S
+        while sent - self.lost - last > MAX_IN_FLIGHT and not self.stop.is_set():
+            time.sleep(0.0002)
+            now = self.taken()
+            if now != last:
+                last, t_end = now, time.monotonic() + MAX_STALL_S
+            elif time.monotonic() > t_end:
+                self.lost = sent - last - MAX_IN_FLIGHT
+                return
 
 
 def _engine_config(lat: float, lon: float, alt: float, heading: str, grade: str,
@@ -235,8 +265,9 @@ def run_demo(
     try:
         outages = (gnss_outage,) if gnss_outage is not None else ()
         mag_rate = MAG_RATE if "mag" in aiding else 0.0
-        stream(run, f"udpout:127.0.0.1:{p_in}", StreamOptions(speed=speed, gnss_outages=outages, mag_rate=mag_rate),
-               stop=stop)
+        hold = KeepUp(lambda: svc.summary.messages, stop) if speed is None else None
+        sent = stream(run, f"udpout:127.0.0.1:{p_in}",
+                      StreamOptions(speed=speed, gnss_outages=outages, mag_rate=mag_rate), stop=stop, hold=hold).messages
         time.sleep(0.5)
     finally:
         svc_stop.set()
@@ -248,4 +279,4 @@ def run_demo(
     c = compare(collected, run.exact.truth)
     return DemoReport(len(collected.attitude), c["att_max"], c["att_final"], c["pos_final"], c["vel_final"],  # type: ignore[arg-type]
                       summary_box[0] if summary_box else svc.summary, collected, c["att_rms"], c["pos_rms"],  # type: ignore[arg-type]
-                      c["pos_max"], c["inside"])  # type: ignore[arg-type]
+                      c["pos_max"], c["inside"], sent)  # type: ignore[arg-type]

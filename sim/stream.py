@@ -30,7 +30,7 @@ import math
 import threading
 import time
 from dataclasses import dataclass
-from typing import Iterator
+from typing import Callable, Iterator
 
 import numpy as np
 
@@ -185,8 +185,14 @@ def _extra_imus(run: SimRun, opts: StreamOptions) -> list[tuple[np.ndarray, np.n
     return out
 
 
-def stream(run: SimRun, url: str, opts: StreamOptions, stop: threading.Event | None = None) -> StreamStats:
-    """Send the run to a pymavlink connection URL (e.g. ``udpout:127.0.0.1:14551``)."""
+def stream(run: SimRun, url: str, opts: StreamOptions, stop: threading.Event | None = None,
+           hold: Callable[[int], None] | None = None) -> StreamStats:
+    """Send the run to a pymavlink connection URL (e.g. ``udpout:127.0.0.1:14551``).
+
+    ``hold(n)``, when given, is called before each sample's messages with the number sent so far and may
+    block until the receiver has caught up (``mavins demo --speed max``: a UDP socket holds a few hundred
+    datagrams, and what overflows it is lost).
+    """
     conn = mavutil.mavlink_connection(url, source_system=opts.sysid, source_component=opts.compid, dialect="ardupilotmega")
     stats = StreamStats()
     t_wall0 = time.monotonic()
@@ -195,6 +201,8 @@ def stream(run: SimRun, url: str, opts: StreamOptions, stop: threading.Event | N
         for t_s, msgs in frames(run, conn.mav, opts):
             if stop is not None and stop.is_set():
                 break
+            if hold is not None:
+                hold(stats.messages)
             if opts.speed is not None:
                 delay = t_wall0 + (t_s - t_sim0) / opts.speed - time.monotonic()
                 if delay > 0:
