@@ -133,6 +133,6 @@ def test_consumer_grade_levels_within_twice_its_limit_heading_from_the_magnetome
         assert 0.5 * limit < row[20 + axis] < 2.0 * limit, (axis, math.degrees(row[20 + axis]), math.degrees(limit))
         assert abs(phi[axis]) < 3.0 * row[20 + axis], (axis, math.degrees(phi[axis]), math.degrees(row[20 + axis]))
     # heading from the magnetometer: within 3 sigma of the filter, whose sigma carries the tilt error the
-    # magnetometer cannot tell from heading (tan(I) times the tilt about magnetic north: the filter
-    # considers the tilt in the update but does not correct it from the magnetometer, docs/filter.md)
+    # magnetometer cannot tell from heading (tan(I) times the tilt about magnetic north, which at rest
+    # nothing else tells apart: kalman.mag_heading's H, docs/filter.md "Magnetometer")
     assert abs(wrap_rad(phi[2])) < 3.0 * row[22], (math.degrees(phi[2]), math.degrees(row[22]))
