@@ -84,7 +84,7 @@ class LiveFilter:
         self._w_ib = (0.0, 0.0, 0.0)  # body rate (rad/s) at the last attitude update, bias removed
         self._t_prev_k = 0.0
         self._T_k = 0.0  # s: the last attitude interval (velocity fixes are interpolated over it)
-        self._incl = (0.0, 0)  # sum and count of tan(inclination) of the accepted magnetometer samples
+        self._incl = np.zeros(2)  # sum and count of tan(inclination) of the accepted magnetometer samples
         self._bind(sd.GEOGRAPHIC)
 
     def _bind(self, frame: int) -> None:
@@ -121,7 +121,7 @@ class LiveFilter:
         self.sums[6] = sd.state_time(s)
         self._t_prev_k = sd.state_time(s)
         self._T_k = 0.0
-        self._incl = (0.0, 0)
+        self._incl[:] = 0.0
         samples = int(cfg[sd.CFG_SAMPLES])
         self.predict_every = max(1, int(round(st.predict_dt / max(dt_sample * samples, 1e-6))))
         self._bind(sd.kernel_frame(cfg))
@@ -230,11 +230,10 @@ class LiveFilter:
         elif kind == "mag":
             (m_b,) = args
             m_n = kalman.mag_level(s, cfg, np.asarray(m_b, dtype=float), np.array(self._w_ib), late)
-            tan_i = kalman.mag_tan_inclination(m_n)
-            tan_used = tan_i if self._incl[1] == 0 else self._incl[0] / self._incl[1]
             if self._update(s, cfg, "mag", ("mag",), kalman.mag_heading(
-                    m_n, math.radians(self.settings.declination), tan_used, math.radians(self.settings.sigma_mag))):
-                self._incl = (self._incl[0] + tan_i, self._incl[1] + 1)
+                    m_n, math.radians(self.settings.declination), kalman.mag_inclination(self._incl, m_n),
+                    math.radians(self.settings.sigma_mag))):
+                kalman.mag_accept(self._incl, m_n)
         elif kind == "zupt":
             self._update(s, cfg, "zupt", ("vel",), kalman.zupt(s, self.settings.sigma_zupt))
 

@@ -773,6 +773,20 @@ def test_mag_level_and_inclination() -> None:
     assert kf.mag_tan_inclination(np.array([-3.0, 4.0, -10.0])) == pytest.approx(-2.0, rel=1e-15)
 
 
+def test_mag_inclination_is_the_mean_of_the_accepted_samples() -> None:
+    """Before any accepted sample the model's tan I is the sample's own; mag_accept adds each accepted one to
+    [sum, count], and the model's tan I is then their mean, whatever the sample at hand."""
+    incl = np.zeros(2)
+    a, b, c = np.array([3.0, 4.0, 10.0]), np.array([0.0, 2.0, 1.0]), np.array([1.0, 0.0, 7.0])
+    assert kf.mag_inclination(incl, a) == pytest.approx(2.0, rel=1e-15)
+    kf.mag_accept(incl, a)
+    np.testing.assert_allclose(incl, [2.0, 1.0], rtol=1e-15)
+    assert kf.mag_inclination(incl, b) == pytest.approx(2.0, rel=1e-15)
+    kf.mag_accept(incl, b)
+    np.testing.assert_allclose(incl, [2.5, 2.0], rtol=1e-15)
+    assert kf.mag_inclination(incl, c) == pytest.approx(1.25, rel=1e-15)
+
+
 def test_mag_heading_with_declination() -> None:
     """The levelled field's angle east of north minus the declination D; H_phi = [-tan I cos D, -tan I sin D, 1]
     (docs/filter.md, the derivative of atan2(m_E, m_N) under m(est) = m + phi x m) at the field the model

@@ -282,8 +282,7 @@ def run_aided(
     w_ib = np.zeros(3)
     v_m = np.empty(3)
     m_b = np.empty(3)
-    sum_incl = 0.0  # tan(inclination) of the accepted magnetometer samples (kalman.mag_heading)
-    n_incl = 0
+    incl = np.zeros(2)  # sum and count of tan(inclination) of the accepted magnetometer samples
     n_out = 0
     n_log = 0
     for i in range(t.shape[0]):
@@ -333,13 +332,11 @@ def run_aided(
             m_b[0], m_b[1], m_b[2] = mag[im, 1], mag[im, 2], mag[im, 3]
             if np.isfinite(m_b[0]) and np.isfinite(m_b[1]) and np.isfinite(m_b[2]):
                 m_n = kf.mag_level(s, cfg, m_b, w_ib, tk - mag[im, 0])
-                tan_i = kf.mag_tan_inclination(m_n)
-                nu, H, R = kf.mag_heading(m_n, declination, tan_i if n_incl == 0 else sum_incl / n_incl, mag[im, 4])
+                nu, H, R = kf.mag_heading(m_n, declination, kf.mag_inclination(incl, m_n), mag[im, 4])
                 nis, ratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate, kf.ALL)
                 n_log = _record(log, n_log, counts, mag[im, 0], K_MAG, 1, nis, ratio, ok)
                 if ok:
-                    sum_incl += tan_i
-                    n_incl += 1
+                    kf.mag_accept(incl, m_n)
             im += 1
         while iz < static.shape[0] and static[iz, 0] <= tk:
             if tk <= static[iz, 1]:

@@ -423,6 +423,22 @@ def mag_tan_inclination(m: np.ndarray) -> float:
 
 
 @kernel
+def mag_inclination(incl: np.ndarray, m: np.ndarray) -> float:
+    """The model's tan(I) for :func:`mag_heading`: the mean over the accepted samples before this one, kept in
+    ``incl = [sum of tan I, count]`` (:func:`mag_accept`), or the levelled sample m's own while there are none."""
+    if incl[1] == 0.0:
+        return mag_tan_inclination(m)
+    return incl[0] / incl[1]
+
+
+@kernel
+def mag_accept(incl: np.ndarray, m: np.ndarray) -> None:
+    """Count the accepted levelled sample m's tan(I) into ``incl = [sum, count]`` (:func:`mag_inclination`)."""
+    incl[0] += mag_tan_inclination(m)
+    incl[1] += 1.0
+
+
+@kernel
 def mag_heading(
     m: np.ndarray, declination: float, tan_incl: float, sigma: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -442,7 +458,7 @@ def mag_heading(
     measures a slightly different combination of heading and tilt, and the
     filter tells the two apart from noise (docs/filter.md "Magnetometer").
     Callers pass the mean tan I of the accepted samples before this one
-    (:func:`mag_tan_inclination`). sigma (rad) is the heading noise, about
+    (:func:`mag_inclination`). sigma (rad) is the heading noise, about
     sensor noise / horizontal field.
     """
     nu = np.empty(1)
