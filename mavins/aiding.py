@@ -221,8 +221,11 @@ class LiveFilter:
                 self.last_pos_t = self.last_hgt_t = t_m
             self.glitch = not ok
             if vel is not None:
-                self._update(s, cfg, "gnss_vel", ("vel",), kalman.gnss_velocity(
-                    s, np.asarray(vel, dtype=float), np.array(self._w_ib), self.lever, late, self._T_k, sig_vel))
+                v = np.asarray(vel, dtype=float)
+                model = kalman.gnss_velocity(s, v, np.array(self._w_ib), self.lever, late, self._T_k, sig_vel)
+                if not math.isfinite(v[2]):  # ground speed and course (GPS_RAW_INT): the horizontal rows
+                    model = kalman.horizontal_rows(*model)
+                self._update(s, cfg, "gnss_vel", ("vel",), model)
         elif kind == "baro":
             h, sigma = args
             if self._update(s, cfg, "baro", ("hgt",), kalman.baro_height(s, self.bias, h, late, sigma)):
@@ -255,6 +258,14 @@ class LiveFilter:
             self.events.append(("WARNING", f"GNSS lost: no accepted fix for {GNSS_LOST_S:.0f} s, free inertial"))
 
     # -- what is published ------------------------------------------------------------
+    def output_row(self, row: np.ndarray) -> np.ndarray:
+        """A solution row (kernel units) extended by the filter's 21 columns (core.aided.FILTER_COLUMNS:
+        1-sigma, bias estimates and their 1-sigma, kernel units), as ``mavins nav`` writes them."""
+        out = np.zeros(aided.OUT_SIZE)
+        out[:sd.OUT_SIZE] = row
+        aided.filter_row(self.P, self.bias, out)
+        return out
+
     def uncertainty(self, t: float, resets: int) -> Uncertainty:
         """1-sigma, test ratios and aiding flags at sensor time t (s)."""
         d = np.sqrt(np.maximum(np.diag(self.P), 0.0))
@@ -281,6 +292,7 @@ def warm_measurements() -> None:
     f = LiveFilter(FilterSettings(aiding=AIDING_KINDS))
     f.start(s, cfg, np.zeros(3), 0.01)
     for kind, args in (("zupt", ()), ("gnss", (math.radians(45.0), math.radians(7.0), 100.0, (0.0, 0.0, 0.0), 1.0, 2.0, 0.3)),
+                       ("gnss", (math.radians(45.0), math.radians(7.0), 100.0, (0.0, 0.0, math.nan), 1.0, 2.0, 0.3)),
                        ("baro", (100.0, 0.5)), ("mag", ((0.2, 0.0, 0.4),))):
         f.measure(s, cfg, 0.0, kind, *args)
 

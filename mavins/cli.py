@@ -159,8 +159,7 @@ def _add_nav(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--mag", type=Path, metavar="MAG.csv",
                    help="calibrated magnetometer, body FRD, any unit: t,mx,my,mz [,sigma] (sigma: heading noise of "
                         "one sample, deg, default 3)")
-    g.add_argument("--declination", type=_real(-180.0, 180.0), default=0.0, metavar="DEG",
-                   help="magnetic declination for --mag (east positive)")
+    _magnetic_options(g, "today's")
     g.add_argument("--rest", type=_Outage(), action="append", metavar="START,END",
                    help="the vehicle stood still over this interval of sensor time (s): a zero-velocity update at "
                         "every attitude update inside it and a zero-rate update (the gyro bias) at its end; "
@@ -282,6 +281,43 @@ class _Outage:
         return a, b
 
 
+class _Date:
+    """``--date``: a UTC date YYYY-MM-DD or a decimal year, 1900..2100, returned as a decimal year."""
+
+    __name__ = "date"
+    metavar = "YYYY-MM-DD|YEAR"
+
+    def describe(self, metavar: str | None = None) -> str:
+        return "a date YYYY-MM-DD or a decimal year in 1900..2100"
+
+    def __call__(self, text: str) -> float:
+        import datetime as dt
+
+        text = str(text).strip()
+        try:
+            d = dt.datetime.strptime(text, "%Y-%m-%d").replace(tzinfo=dt.timezone.utc)
+            y = d.year + (d - d.replace(month=1, day=1)).total_seconds() / (
+                d.replace(year=d.year + 1, month=1, day=1) - d.replace(month=1, day=1)).total_seconds()
+        except ValueError:
+            try:
+                y = float(text)
+            except ValueError:
+                y = math.nan
+        if not (math.isfinite(y) and 1900.0 <= y <= 2100.0):
+            raise argparse.ArgumentTypeError(f"expected {self.describe()}, got {text!r}")
+        return y
+
+
+def _magnetic_options(g: argparse._ArgumentGroup, date_default: str) -> None:
+    """``--declination`` and ``--date``: the magnetic declination, by default the World Magnetic
+    Model's at the position and date (docs/conventions.md "Magnetic field")."""
+    g.add_argument("--declination", type=_real(-180.0, 180.0), default=None, metavar="DEG",
+                   help="magnetic declination (east positive) for the magnetometer; default: the World Magnetic "
+                        "Model's at the initial position and the date")
+    g.add_argument("--date", type=_Date(), default=None, metavar="YYYY-MM-DD",
+                   help=f"the date for the magnetic model (or a decimal year); default: {date_default}")
+
+
 class _Vec3:
     """X,Y,Z: three finite numbers."""
 
@@ -325,7 +361,7 @@ def _cmd_nav(args: argparse.Namespace) -> int:
 
             rows, counts = run_nav_aided(args.imu[0], args.init, args.output, opts,
                                          AidingFiles(args.gnss, args.baro, args.mag, args.declination,
-                                                     tuple(args.rest or ())),
+                                                     tuple(args.rest or ()), args.date),
                                          _imu_spec(args), args.lever_arm, args.gate)
             for kind, (ok, bad) in counts.items():
                 if ok or bad:
@@ -431,7 +467,9 @@ def _add_sim(sub: argparse._SubParsersAction) -> None:
                    help="no GNSS fix between these sensor times (s), in files and when streaming")
     p.add_argument("--mag-rate", type=_real(0.0, 100.0), default=0.0, metavar="HZ",
                    help="magnetometer samples per second written to mag.csv, or streamed in HIGHRES_IMU (0 = none; "
-                        "48 uT field, declination 2 deg, inclination 63 deg, 0.3 uT noise; docs/simulator.md)")
+                        "the World Magnetic Model's field at the start on --date, 0.3 uT noise; docs/simulator.md)")
+    p.add_argument("--date", type=_Date(), default=None, metavar="YYYY-MM-DD",
+                   help="the date of the simulated magnetic field (or a decimal year); default: today's")
     p.add_argument("--imus", type=_positive_int(1, 3), default=1, metavar="N",
                    help="IMUs (1..3): extras written as imu1.csv, imu2.csv, streamed as HIGHRES_IMU id 1, 2 "
                         "(with --msg raw as SCALED_IMU2/3); scenario [[faults]] name them (docs/redundancy.md)")
@@ -466,7 +504,7 @@ def _cmd_sim(args: argparse.Namespace) -> int:
             gnss_on = args.gnss_rate > 0
             aiding = simulate_aiding(run, GnssConfig(rate=args.gnss_rate, outages=outages) if gnss_on else None,
                                      BaroConfig() if gnss_on else None,
-                                     MagConfig(rate=args.mag_rate) if args.mag_rate > 0 else None) \
+                                     _sim_mag(MagConfig, run, args) if args.mag_rate > 0 else None) \
                 if gnss_on or args.mag_rate > 0 else None
             paths = write(run, args.output, aiding)
     except (ValueError, OSError) as exc:  # ScenarioError, DataFileError and ResourceError are ValueErrors
@@ -477,14 +515,26 @@ def _cmd_sim(args: argparse.Namespace) -> int:
         print(f"mavins sim: {scenario.name}: {len(run.t)} samples at {run.rate:g} Hz, grade {run.grade}: "
               + ", ".join(str(p) for p in paths), file=sys.stderr)
         return 0
+    from sim.aiding import MagConfig
     from sim.stream import StreamOptions, stream
 
     outages = (tuple(args.gnss_outage),) if args.gnss_outage else ()
     stats = stream(run, args.stream, StreamOptions(msg=args.msg, imu_rates=args.imu_rates, speed=speed, sysid=args.sysid,
                                                   imus=args.imus, seed=args.seed, gnss_outages=outages,
-                                                  mag_rate=args.mag_rate))
+                                                  mag_rate=args.mag_rate,
+                                                  mag=_sim_mag(MagConfig, run, args)))
     print(f"mavins sim: streamed {stats.imu_messages} IMU messages to {args.stream}", file=sys.stderr)
     return 0
+
+
+def _sim_mag(mag_config: type, run: object, args: argparse.Namespace) -> object:
+    """The simulator's magnetometer: the World Magnetic Model's field at the scenario's start on
+    ``--date`` (default today), at ``--mag-rate``."""
+    from mavins.core.magmodel import this_year
+
+    init = run.init()  # type: ignore[attr-defined]
+    year = args.date if args.date is not None else this_year()
+    return mag_config.at(init.lat, init.lon, init.h, year, rate=args.mag_rate or 10.0)
 
 
 def _scenario_error(name: str, exc: Exception) -> str:
@@ -506,7 +556,7 @@ def _nav_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--heading", type=_Heading(), default="auto", metavar="DEG|SOURCE",
                    help="initial yaw in degrees, or a source: vehicle (its ATTITUDE), mag (magnetometer), "
                         "gyrocompass (navigation-grade gyros), auto (vehicle, else mag, else gyrocompass)")
-    g.add_argument("--declination", type=_real(-180.0, 180.0), default=0.0, metavar="DEG", help="magnetic declination for --heading mag")
+    _magnetic_options(g, "the vehicle's (SYSTEM_TIME; a log's GPS time), else today's")
     g.add_argument("--gyro-bias", choices=("estimate", "none"), default="estimate",
                    help="estimate = remove the mean gyro minus Earth rate of the static window (not with gyrocompass)")
     g.add_argument("--align", type=_real(0.0), default=10.0, metavar="S", help="static coarse alignment window (sensor time)")
@@ -620,7 +670,7 @@ def _engine_config(args: argparse.Namespace):  # type: ignore[no-untyped-def]
         raise ValueError(f"--frame {strapdown.frame} navigates free inertial only (the filter works in the "
                          "geographic frame): add --aiding none")
     return EngineConfig(lat=args.lat, lon=args.lon, alt=args.alt, heading=heading, declination=args.declination,
-                        align=args.align, rate=args.rate, gyro_bias=args.gyro_bias, max_gap=args.max_gap,
+                        mag_year=args.date, align=args.align, rate=args.rate, gyro_bias=args.gyro_bias, max_gap=args.max_gap,
                         filter=flt, geoid_height=args.geoid_height, **strapdown.keywords())
 
 

@@ -190,10 +190,10 @@ class KeepUp:
 
 
 def _engine_config(lat: float, lon: float, alt: float, heading: str, grade: str,
-                   aiding: tuple[str, ...]) -> EngineConfig:
-    from sim.aiding import MagConfig
-
-    return EngineConfig(lat=lat, lon=lon, alt=alt, heading=heading, align=5.0, declination=MagConfig().declination,
+                   aiding: tuple[str, ...], year: float | None = None) -> EngineConfig:
+    """The service's settings; the magnetic declination is the World Magnetic Model's at the start for
+    ``year`` (None: today), the model the simulator's field comes from."""
+    return EngineConfig(lat=lat, lon=lon, alt=alt, heading=heading, align=5.0, mag_year=year,
                         filter=FilterSettings(spec=grade if grade != "ideal" else "navigation", aiding=aiding))
 
 
@@ -241,7 +241,11 @@ def run_demo(
             compiling.wait()
     p_in, p_out = free_udp_port(), free_udp_port()
     init = run.init()
-    engine_cfg = _engine_config(init.lat, init.lon, init.h, heading, grade, aiding)
+    from mavins.core.magmodel import this_year
+    from sim.aiding import MagConfig
+
+    year = this_year()  # one date for the simulator's field and the service's magnetic model
+    engine_cfg = _engine_config(init.lat, init.lon, init.h, heading, grade, aiding, year)
     recorder = None
     if rerun_path is not None or rerun_serve:
         from .record.recorder import Recorder
@@ -267,7 +271,8 @@ def run_demo(
         mag_rate = MAG_RATE if "mag" in aiding else 0.0
         hold = KeepUp(lambda: svc.summary.messages, stop) if speed is None else None
         sent = stream(run, f"udpout:127.0.0.1:{p_in}",
-                      StreamOptions(speed=speed, gnss_outages=outages, mag_rate=mag_rate), stop=stop, hold=hold).messages
+                      StreamOptions(speed=speed, gnss_outages=outages, mag_rate=mag_rate,
+                                    mag=MagConfig.at(init.lat, init.lon, init.h, year)), stop=stop, hold=hold).messages
         time.sleep(0.5)
     finally:
         svc_stop.set()

@@ -17,7 +17,7 @@ from typing import Callable
 
 import numpy as np
 
-from .core import align, earth
+from .core import align, earth, magmodel
 from .core import strapdown as sd
 from .core.jit import for_frame
 from .core.records import ImuSample, Solution
@@ -48,7 +48,8 @@ class EngineConfig:
     lon: float | None = None
     alt: float | None = None
     heading: float | str = "auto"
-    declination: float = 0.0
+    declination: float | None = None  # deg, east positive; None: the World Magnetic Model's at the position
+    mag_year: float | None = None  # decimal year for the magnetic model; None: the stream's SYSTEM_TIME, else today
     align: float = 10.0
     rate: float = 50.0
     # the strapdown settings (mavins/core/settings.py: names, defaults and help defined once)
@@ -105,6 +106,8 @@ class Engine:
     _next_zupt: float = field(init=False, default=-math.inf)
     _next_mag: float = field(init=False, default=-math.inf)
     _row: np.ndarray = field(init=False, default_factory=lambda: np.zeros(sd.OUT_SIZE))
+    _unix_date: float | None = field(init=False, default=None)  # s: UNIX time the stream reported (SYSTEM_TIME)
+    declination: float = field(init=False, default=0.0)  # deg: the one used by the alignment and the filter
 
     def __post_init__(self) -> None:
         h = self.cfg.heading
@@ -112,8 +115,9 @@ class Engine:
             raise ValueError(f"heading must be degrees or one of {', '.join(HEADING_WORDS)}, got {h!r}")
         if self.cfg.gyro_bias not in ("estimate", "none"):
             raise ValueError(f"gyro_bias must be estimate or none, got {self.cfg.gyro_bias!r}")
-        # one declination for the alignment and the filter's magnetometer updates
-        self.filter = LiveFilter(dataclasses.replace(self.cfg.filter, declination=self.cfg.declination))
+        # one declination for the alignment and the filter's magnetometer updates (set at each alignment)
+        self.declination = self.cfg.declination if self.cfg.declination is not None else 0.0
+        self.filter = LiveFilter(dataclasses.replace(self.cfg.filter, declination=self.declination))
         self._kcfg = sd.make_config(**strapdown_of(self.cfg).keywords())
         self._solution_row = for_frame(sd.solution_row, sd.kernel_frame(self._kcfg))
         if self.cfg.frame != "geographic" and self.cfg.filter.aiding:
@@ -131,6 +135,31 @@ class Engine:
             self._pos = (lat, lon, alt)
             self._pos_sigma = sigma
             self._event("INFO", f"initial position from {source}: {lat:.7f}, {lon:.7f}, {alt:.1f} m")
+
+    def set_date(self, unix_s: float) -> None:
+        """The UTC date the vehicle reports (UNIX s, e.g. SYSTEM_TIME.time_unix_usec), for the
+        magnetic model; times that cannot be a date (a boot clock) are ignored."""
+        if self._unix_date is None and magmodel.plausible_unix(unix_s):
+            self._unix_date = float(unix_s)
+
+    def _magnetic_declination(self, uses_mag: bool) -> float:
+        """The declination (deg) for this alignment: ``--declination``, else the World Magnetic
+        Model's at the initial position and the date (docs/conventions.md "Magnetic field")."""
+        if self.cfg.declination is not None:
+            return float(self.cfg.declination)
+        if self.cfg.mag_year is not None:
+            year, when = float(self.cfg.mag_year), "the given date"
+        elif self._unix_date is not None:
+            year, when = magmodel.decimal_year(self._unix_date), "the vehicle's date"
+        else:
+            year, when = magmodel.this_year(), "today's date (the stream gave none)"
+        lat, lon, alt = self._pos  # type: ignore[misc]
+        f = magmodel.field_at(lat, lon, alt, year)
+        if uses_mag:
+            self._event("INFO", f"magnetic declination {f.declination:.2f} deg (inclination {f.inclination:.1f} deg, "
+                                f"{f.intensity / 1000.0:.1f} uT) from {f.model} at the initial position for {year:.2f}, "
+                                f"{when}" + (" (outside the model's years: extrapolated)" if f.extrapolated else ""))
+        return f.declination
 
     def set_vehicle_yaw(self, yaw_rad: float) -> None:
         """The vehicle's own heading (from its ATTITUDE), a heading source for alignment."""
@@ -221,6 +250,10 @@ class Engine:
         data = np.array(self._acc)
         w_mean, f_mean, m_mean = data[:, 0:3].mean(0), data[:, 3:6].mean(0), data[:, 6:9].mean(0)
         roll, pitch = align.level(f_mean)
+        has_mag = bool(np.all(np.isfinite(m_mean)) and np.linalg.norm(m_mean) > 0)
+        self.declination = self._magnetic_declination(has_mag and (
+            "mag" in self.cfg.filter.aiding or self.cfg.heading in ("mag", "auto")))
+        self.filter.settings = dataclasses.replace(self.filter.settings, declination=self.declination)
         yaw, source = self._heading(w_mean, m_mean, roll, pitch)
         lat, lon, alt = self._pos  # type: ignore[misc]
         self._s = sd.init_state(smp.t, math.radians(lat), math.radians(lon), alt, np.zeros(3), roll, pitch, yaw)
@@ -259,7 +292,7 @@ class Engine:
                 return self._vehicle_yaw, "vehicle ATTITUDE"
         if h == "mag" or (h == "auto" and has_mag):
             if has_mag:
-                return align.mag_heading(m_mean, roll, pitch, math.radians(self.cfg.declination)), "magnetometer"
+                return align.mag_heading(m_mean, roll, pitch, math.radians(self.declination)), "magnetometer"
             self._event("WARNING", "no magnetometer data: heading from gyrocompass")
         return align.gyrocompass(w_mean, roll, pitch), "gyrocompass"
 

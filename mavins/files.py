@@ -749,18 +749,28 @@ def read_solution(path: str | Path) -> np.ndarray:
 
 
 class SolutionWriter:
-    """Write solution rows (kernel radians) to a solution CSV as they come."""
+    """Write solution rows (kernel units) to a solution CSV as they come: the 14 solution columns,
+    or with ``columns`` (the filter's 35, core.aided.OUT_COLUMNS) those, in file units
+    (core.aided.to_file_units)."""
 
-    def __init__(self, path: str | Path) -> None:
+    def __init__(self, path: str | Path, columns: tuple[str, ...] = SOLUTION_COLUMNS) -> None:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._fh = open(self.path, "w", encoding="utf-8", newline="")
-        self._fh.write(",".join(SOLUTION_COLUMNS) + "\n")
+        self._fh.write(",".join(columns) + "\n")
+        self._width = len(columns)
         self.rows = 0
 
-    def write(self, row_rad: np.ndarray) -> None:
-        r = row_rad.copy()
-        r[[1, 2, 7, 8, 9]] = np.degrees(r[[1, 2, 7, 8, 9]])
+    def write(self, row: np.ndarray) -> None:
+        if row.shape[0] != self._width:
+            raise ValueError(f"a row of {row.shape[0]} values for {self._width} columns")
+        if self._width == len(SOLUTION_COLUMNS):
+            r = row.copy()
+            r[[1, 2, 7, 8, 9]] = np.degrees(r[[1, 2, 7, 8, 9]])
+        else:
+            from .core.aided import to_file_units
+
+            r = to_file_units(row[None, :])[0]
         self._fh.write(",".join(map(repr, r.tolist())) + "\n")
         self.rows += 1
 

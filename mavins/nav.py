@@ -131,13 +131,24 @@ MAG_OPTIONAL = ("sigma",)
 @dataclass(frozen=True)
 class AidingFiles:
     """The aiding inputs of ``mavins nav``: files (None = not given), the magnetic declination (deg, east
-    positive) and the rest intervals ``(start, end)`` (s, sensor time)."""
+    positive; None: the World Magnetic Model's at the initial position on ``year``, a decimal year,
+    None: today), the rest intervals ``(start, end)`` (s, sensor time)."""
 
     gnss: Path | None = None
     baro: Path | None = None
     mag: Path | None = None
-    declination: float = 0.0
+    declination: float | None = None
     rest: tuple[tuple[float, float], ...] = ()
+    year: float | None = None
+
+    def declination_at(self, lat_deg: float, lon_deg: float, h_m: float) -> float:
+        """The declination (deg) to use at the initial position: the given one, else the model's."""
+        if self.declination is not None:
+            return float(self.declination)
+        from .core import magmodel
+
+        year = self.year if self.year is not None else magmodel.this_year()
+        return magmodel.field_at(lat_deg, lon_deg, h_m, year).declination
 
 
 def rest_windows(rest: tuple[tuple[float, float], ...]) -> np.ndarray | None:
@@ -261,7 +272,7 @@ def run_nav_aided(imu_path: Path, init_path: Path, out_path: Path, opts: NavOpti
     try:
         rows, stats = aided.navigate_aided(
             imu, init_keys, gnss, baro, mag=mag, static=static, spec=spec, lever_arm=lever_arm, gate=gate,
-            declination=aiding.declination,
+            declination=aiding.declination_at(init.lat, init.lon, init.h) if mag is not None else 0.0,
             **{k: v for k, v in opts.strapdown.keywords().items() if k != "imu_rates"})
     except ValueError as exc:
         raise files.DataFileError(str(exc)) from None

@@ -13,6 +13,10 @@ import math
 from collections import Counter
 from dataclasses import dataclass, field
 
+import numpy as np
+
+from .core import aided
+from .core import strapdown as sd
 from .core.frames import local_ned
 from .core.records import ImuSample, Solution
 from .engine import Engine, EngineConfig
@@ -25,7 +29,8 @@ log = logging.getLogger("mavins")
 
 RESTART_JUMP = 1.0  # s: sensor time going back further than this is an autopilot restart
 CLOCK_MATCH_S = 2.0  # s: an aiding message stamped this close to the IMU time is on the IMU's clock
-GNSS_MESSAGES = ("GPS_RAW_INT", "GPS_INPUT", "HIL_GPS")
+GNSS_MESSAGES = ("GPS_RAW_INT", "GPS2_RAW", "GPS_INPUT", "HIL_GPS")
+MS_WRAP_S = 2**32 * 1e-3  # s: a uint32 millisecond field (time_boot_ms) wraps after this (49.7 days)
 GNSS_SIGMA_H = 2.5  # m: horizontal 1-sigma when a fix gives no accuracy (docs/conventions.md GNSS default)
 GNSS_SIGMA_V = 5.0  # m
 GNSS_SIGMA_VEL = 0.3  # m/s
@@ -58,6 +63,16 @@ class Pipeline:
             self.ingest = self.imuset.primary
 
     @property
+    def columns(self) -> tuple[str, ...]:
+        """A solution file's columns (docs/conventions.md): the 14 solution columns, and the filter's
+        sigma and bias columns after them whenever it aids (as ``mavins nav`` writes them)."""
+        return aided.OUT_COLUMNS if self.engine_cfg.filter.aiding else sd.OUT_COLUMNS
+
+    def file_row(self, out: Solution) -> np.ndarray:
+        """The row of ``columns`` for an output set (kernel units), the filter's state as of it."""
+        return self.engine.filter.output_row(out.row) if self.engine_cfg.filter.aiding else out.row
+
+    @property
     def vehicle_sysid(self) -> int | None:
         return self.ingest.locked_system
 
@@ -86,8 +101,10 @@ class Pipeline:
                 if self.recorder is not None and origin is not None and self.last_sample is not None:
                     self.recorder.on_gnss(self.last_sample.t, local_ned(math.radians(lat), math.radians(lon), h, origin))
         elif name == "SCALED_PRESSURE" and math.isfinite(msg.press_abs) and msg.press_abs > 0.0:  # type: ignore[attr-defined]
-            self.engine.on_baro(self._on_imu_clock(msg.time_boot_ms * 1e-3), isa_height(msg.press_abs),  # type: ignore[attr-defined]
+            self.engine.on_baro(self._on_imu_clock(self._unwrap_ms(msg.time_boot_ms)), isa_height(msg.press_abs),  # type: ignore[attr-defined]
                                 BARO_SIGMA_M)
+        elif name == "SYSTEM_TIME" and msg.time_unix_usec:  # type: ignore[attr-defined]
+            self.engine.set_date(msg.time_unix_usec * 1e-6)  # type: ignore[attr-defined]
         elif name == "GLOBAL_POSITION_INT" and (msg.lat or msg.lon):  # type: ignore[attr-defined]
             self.engine.set_position(msg.lat * 1e-7, msg.lon * 1e-7, msg.alt / 1000.0, "GLOBAL_POSITION_INT")  # type: ignore[attr-defined]
         elif name == "ATTITUDE" and math.isfinite(msg.yaw):  # type: ignore[attr-defined]
@@ -130,6 +147,16 @@ class Pipeline:
                         rec.on_counters(float(r[0]), counts)
         return out
 
+    def _unwrap_ms(self, ms: int) -> float:
+        """A uint32 ``time_boot_ms`` (ms) as seconds on the IMU's clock: the wrap of 2^32 ms nearest
+        the last sample's time. An autopilot whose clock is UNIX time (PX4 SITL: about 1.7e12 ms)
+        sends it modulo 2^32, and the IMU's uint64 microseconds tell the lost high part."""
+        t = ms * 1e-3
+        last = self.last_sample
+        if last is None:
+            return t
+        return t + round((last.t - t) / MS_WRAP_S) * MS_WRAP_S
+
     def _on_imu_clock(self, t: float | None) -> float | None:
         """A message's own time if it is on the IMU's clock (within CLOCK_MATCH_S of the last
         sample), else None: the measurement is then taken as of the latest sample."""
@@ -171,11 +198,14 @@ def gnss_fix(msg: object, geoid_height: float) -> tuple[float | None, float, flo
     t = m.time_usec * 1e-6 if getattr(m, "time_usec", 0) else None  # type: ignore[attr-defined]
     vel = None
     sig_vel = GNSS_SIGMA_VEL
-    if name == "GPS_RAW_INT":
+    if name in ("GPS_RAW_INT", "GPS2_RAW"):
         alt_e = getattr(m, "alt_ellipsoid", 0)
         h = alt_e / 1000.0 if alt_e else m.alt / 1000.0 + geoid_height  # type: ignore[attr-defined]
         sig_h = m.h_acc / 1000.0 if getattr(m, "h_acc", 0) else GNSS_SIGMA_H
         sig_v = m.v_acc / 1000.0 if getattr(m, "v_acc", 0) else GNSS_SIGMA_V
+        vel = ground_velocity(m.vel, m.cog)  # type: ignore[attr-defined]
+        if vel is not None and getattr(m, "vel_acc", 0):
+            sig_vel = m.vel_acc / 1000.0  # type: ignore[attr-defined]
     elif name == "GPS_INPUT":
         ign = m.ignore_flags  # type: ignore[attr-defined]
         h = m.alt + geoid_height  # type: ignore[attr-defined]
@@ -195,12 +225,28 @@ def gnss_fix(msg: object, geoid_height: float) -> tuple[float | None, float, flo
     return t, m.lat * 1e-7, m.lon * 1e-7, h, vel, sig_h, sig_v, sig_vel  # type: ignore[attr-defined]
 
 
+UINT16_UNKNOWN = 65535  # GPS_RAW_INT / GPS2_RAW vel and cog: "If unknown, set to: UINT16_MAX"
+
+
+def ground_velocity(vel_cm_s: int, cog_cdeg: int) -> tuple[float, float, float] | None:
+    """Horizontal velocity (m/s NED, vertical NaN: not measured) from GPS_RAW_INT's ground speed
+    ``vel`` (cm/s) and course over ground ``cog`` (cdeg from true north, clockwise):
+    ``v_N = vel cos(cog)``, ``v_E = vel sin(cog)``; None when either is unknown (UINT16_MAX)
+    or the course is out of its range (0..35999)."""
+    if vel_cm_s == UINT16_UNKNOWN or cog_cdeg == UINT16_UNKNOWN or not 0 <= cog_cdeg < 36000:
+        return None
+    speed, course = vel_cm_s / 100.0, math.radians(cog_cdeg / 100.0)
+    return speed * math.cos(course), speed * math.sin(course), math.nan
+
+
 def gnss_invalid(fix: tuple) -> str | None:
     """Why a decoded fix cannot be used (``"out_of_range"``, ``"inaccurate"``), or None: latitude
-    and longitude within their ranges, every value finite, accuracies at most GNSS_MAX_SIGMA."""
+    and longitude within their ranges, every value finite (a NaN vertical velocity means "not
+    measured": ground speed and course), accuracies at most GNSS_MAX_SIGMA."""
     _, lat, lon, h, vel, sig_h, sig_v, sig_vel = fix
-    values = (lat, lon, h, sig_h, sig_v, sig_vel, *(vel or ()))
-    if not all(math.isfinite(v) for v in values) or abs(lat) > 90.0 or abs(lon) > 180.0:
+    values = (lat, lon, h, sig_h, sig_v, sig_vel, *(vel[:2] if vel else ()))  # vel[2] NaN: horizontal only
+    if not all(math.isfinite(v) for v in values) or abs(lat) > 90.0 or abs(lon) > 180.0 \
+            or (vel is not None and math.isinf(vel[2])):
         return "out_of_range"
     if not (0.0 < sig_h <= GNSS_MAX_SIGMA and 0.0 < sig_v <= GNSS_MAX_SIGMA and sig_vel > 0.0):
         return "inaccurate"

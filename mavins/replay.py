@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from . import files
+from .core import magmodel
 from .core.records import Solution
 from .engine import EngineConfig
 from .files import FOUND, DataFileError, SolutionWriter, sniff
@@ -240,7 +241,16 @@ def scaled_pressure(enc: mavlink.MAVLink, dec: mavlink.MAVLink, t_us: int, press
     if not (math.isfinite(p) and p > 0.0):
         raise ValueError(f"pressure {pressure_pa!r} Pa")
     temp = _int(temperature_c * 100.0, -32768, 32767, 0)
-    m = enc.scaled_pressure_encode(_int(t_us // 1000, 0, 2**32 - 1), p / 100.0, 0.0, temp)
+    # time_boot_ms is uint32 ms: a clock past 49.7 days (a UNIX-time SITL clock) is sent modulo 2^32, as an
+    # autopilot sends it; the pipeline restores the high part from the IMU's uint64 time (Pipeline._unwrap_ms)
+    m = enc.scaled_pressure_encode(_int(t_us, 0, 2**64 - 1) // 1000 % 2**32, p / 100.0, 0.0, temp)
+    return _frame(enc, dec, m)
+
+
+def system_time(enc: mavlink.MAVLink, dec: mavlink.MAVLink, t_us: int, unix_us: int) -> mavlink.MAVLink_message:
+    """A SYSTEM_TIME of the UTC time ``unix_us`` (us since the UNIX epoch, from the log's GPS) at
+    ``t_us`` on the IMU clock (MAVLink common.xml SYSTEM_TIME: time_unix_usec, time_boot_ms uint32 ms)."""
+    m = enc.system_time_encode(_int(unix_us, 1, 2**64 - 1), _int(t_us, 0, 2**64 - 1) // 1000 % 2**32)
     return _frame(enc, dec, m)
 
 
@@ -410,6 +420,11 @@ def _ulog_messages(path: Path, report: LogReport) -> Iterator[tuple[float, mavli
     mag_t = mag[1]["timestamp"] if mag is not None else ()
     mag_xyz = tuple(mag[1][k] for k in ULOG_MAG[mag[0]]) if mag is not None else ()
 
+    # the UTC date (for the magnetic model): the first fix with a UTC time (PX4 ``time_utc_usec``, us)
+    utc = gps[1].get("time_utc_usec") if gps is not None else None
+    dated = next((j for j in range(len(utc)) if magmodel.plausible_unix(float(utc[j]) * 1e-6)), None) \
+        if utc is not None else None
+
     def aiding(k: int, j: int) -> mavlink.MAVLink_message:
         if k == 0:
             return ulog_gps(enc, dec, gps[1], j)  # type: ignore[index]
@@ -428,6 +443,8 @@ def _ulog_messages(path: Path, report: LogReport) -> Iterator[tuple[float, mavli
                 except PACK_ERRORS:  # a value no field can hold (NaN position, negative time, ...)
                     report.rejected[(gps if k == 0 else baro)[0]] += 1  # type: ignore[index]
                 else:
+                    if k == 0 and j == dated:
+                        yield i / n, system_time(enc, dec, int(gps[1]["timestamp"][j]), int(utc[j]))  # type: ignore[index]
                     yield i / n, msg
             while m < len(mag_t) and int(mag_t[m]) <= t:
                 held = (mag_xyz[0][m], mag_xyz[1][m], mag_xyz[2][m])
@@ -513,6 +530,17 @@ def _df_value(v: tuple, fmt: str, index: dict[str, int], name: str, default: flo
     return float(v[i]) / 100.0 if fmt[i] in DF_HUNDREDTHS else float(v[i])
 
 
+GPS_EPOCH_UNIX = 315964800.0  # s: 1980-01-06T00:00:00Z, the start of GPS week 0 (IS-GPS-200 20.3.3.5.2.4)
+
+
+def gps_unix(week: float, ms_of_week: float) -> float:
+    """UNIX time (s) of a GPS week and millisecond of week, without the leap seconds (18 s since
+    2017): the date to within a minute, which is what the magnetic model needs. NaN if unknown."""
+    if not (math.isfinite(week) and math.isfinite(ms_of_week)) or week <= 0:
+        return math.nan
+    return GPS_EPOCH_UNIX + week * 604800.0 + ms_of_week * 1e-3
+
+
 def df_gps(enc: mavlink.MAVLink, dec: mavlink.MAVLink, t_us: int, gps: dict[str, float],
            gpa: dict[str, float] | None) -> mavlink.MAVLink_message:
     """GPS_RAW_INT of an ArduPilot ``GPS`` record (and its ``GPA``, if logged), values already in the
@@ -546,6 +574,7 @@ def _bin_messages(path: Path, report: LogReport) -> Iterator[tuple[float, mavlin
     aid: dict[int, tuple[str, str, struct.Struct, dict[str, int], int]] = {}
     pending: tuple[int, int, dict[str, float]] | None = None  # a GPS record waiting for its GPA: (time us, offset, values)
     held: tuple[float, float, float] | None = None  # the latest magnetometer sample (gauss)
+    dated = False  # a SYSTEM_TIME was sent
 
     def gps_out(gpa: dict[str, float] | None) -> Iterator[tuple[float, mavlink.MAVLink_message]]:
         nonlocal pending
@@ -615,6 +644,11 @@ def _bin_messages(path: Path, report: LogReport) -> Iterator[tuple[float, mavlin
                         if name_s == "GPS":
                             yield from gps_out(None)
                             pending = (t_us, off, values)
+                            if not dated:  # the UTC date for the magnetic model, from the first dated fix
+                                unix = gps_unix(values.get("GWk", math.nan), values.get("GMS", math.nan))
+                                if magmodel.plausible_unix(unix):
+                                    dated = True
+                                    yield off / size, system_time(enc, dec, t_us, int(unix * 1e6))
                         elif name_s == "GPA":
                             if pending is not None and pending[0] == t_us:
                                 yield from gps_out(values)
@@ -715,7 +749,8 @@ def replay(
     on_output: Callable[[Solution, Pipeline], None] | None = None, recorder: object | None = None,
     *, rerun: Path | None = None,
 ) -> ReplayResult:
-    """Run the pipeline over a log; write output sets to ``out_csv`` (solution columns).
+    """Run the pipeline over a log; write output sets to ``out_csv`` (the solution columns, and the
+    filter's sigma and bias columns when it aids, as ``mavins nav``: docs/conventions.md).
 
     ``rerun`` records to a Rerun file (``recorder``: a recorder of the
     caller's, closed at the end). The CSV and the Rerun file are written to
@@ -739,7 +774,7 @@ def replay(
 
                 recorder = Recorder(tmp_rrd, serve=False, app="mavins-replay", live=False)
             pipeline = Pipeline(engine_cfg, ingest_cfg, recorder=recorder)
-            writer = SolutionWriter(tmp_csv) if tmp_csv is not None else None
+            writer = SolutionWriter(tmp_csv, pipeline.columns) if tmp_csv is not None else None
             n_skips = 0
             with Progress(f"replay {path.name}", 1.0) as bar:
                 for frac, msg in messages:
@@ -753,7 +788,7 @@ def replay(
                     if out is not None:
                         n_out += 1
                         if writer is not None:
-                            writer.write(out.row)
+                            writer.write(pipeline.file_row(out))
                         if on_output is not None:
                             on_output(out, pipeline)
                     if t_first is None and pipeline.last_sample is not None:

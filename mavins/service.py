@@ -154,7 +154,7 @@ class Service:
             self.master.close()
             raise
         self._tlog = open(cfg.tlog, "wb") if cfg.tlog else None
-        self._solution = SolutionWriter(cfg.solution) if cfg.solution else None
+        self._solution = SolutionWriter(cfg.solution, self.pipeline.columns) if cfg.solution else None
         self._sysid_known = cfg.sysid is not None
         self._last_hb = 0.0
         self._last_status = 0.0
@@ -283,7 +283,7 @@ class Service:
                 # from the datagrams' arrival in the kernel to this output set sent
                 rec.on_latency(float(out.row[0]), 1e3 * (time.time() - self._batch_time + self._batch_age))
             if self._solution is not None:
-                self._solution.write(out.row)
+                self._solution.write(self.pipeline.file_row(out))
 
     def _gps_time(self, t: float) -> tuple[int, int] | None:
         """GPS week and milliseconds of sensor time t when the GNSS input carries UTC."""

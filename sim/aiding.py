@@ -90,6 +90,15 @@ class MagConfig:
     sigma: float = 0.3
     hard_iron: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
+    @classmethod
+    def at(cls, lat_deg: float, lon_deg: float, h_m: float, year: float, **kw: object) -> "MagConfig":
+        """The World Magnetic Model's field (mavins.core.magmodel) at a position (deg, deg, ellipsoidal m)
+        and decimal year: its declination, inclination and strength (nT -> uT); ``kw`` sets the rest."""
+        from mavins.core.magmodel import field_at
+
+        f = field_at(lat_deg, lon_deg, h_m, year)
+        return cls(declination=f.declination, inclination=f.inclination, strength=f.intensity / 1000.0, **kw)
+
     def heading_sigma(self) -> float:
         """Heading noise of one sample (rad): the noise across the horizontal field over its
         strength, ``sigma / (B cos I)`` (the levelled field's angle moves by its perpendicular part)."""

@@ -34,6 +34,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
@@ -135,6 +136,60 @@ def test_mag_heading_with_declination(tmp_path: Path) -> None:
     assert_attitude(res.nav, b.roll, b.pitch, b.yaw)
 
 
+# --- the default declination: the World Magnetic Model's --------------------------------------------
+# NOAA's WMM2025 test values (WMM2025testvalues.pdf) at 80 S, 240 E (= -120), on the ellipsoid: the
+# field's north, east and down components (nT, printed to 0.1 nT) and the declination (deg, to 0.01)
+NOAA_POINT = {2025.0: ((6117.5, 15751.9, -52022.5), 68.78), 2027.5: ((6200.7, 15730.3, -51783.7), 68.49)}
+
+
+@dataclass(frozen=True)
+class NoaaBoard(Board):
+    """A board at rest at NOAA's test point whose magnetometer reads the published field (X, Y, Z)."""
+
+    xyz_nt: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def mag(self) -> np.ndarray:
+        return self.c_nb() @ (np.array(self.xyz_nt) * 1e-5)  # nT -> gauss
+
+
+@pytest.mark.parametrize("year, how", [(2025.0, "--date"), (2027.5, "SYSTEM_TIME")])
+def test_mag_heading_without_declination_takes_the_world_magnetic_model(tmp_path: Path, year: float,
+                                                                        how: str) -> None:
+    """No --declination: the declination is the World Magnetic Model's at the position and date. The
+    board (yaw 80, tilted 4, -7 deg) at 80 S, 120 W reads the field NOAA publishes there, whose horizontal
+    part lies atan2(Y, X) east of true north (68.78 deg in 2025.0, 68.49 in 2027.5, typed). The date comes
+    from --date, or from the vehicle's SYSTEM_TIME (2027-07-02T12:00Z = 2027.5: UNIX 1814529600 s).
+    The aligned yaw must be 80 deg to NOAA's rounding of D (0.005 deg) plus the float32 1e-4 deg; the old
+    default of 0 would give 80 - 68.8 = 11.2 deg, the other date's model 0.29 deg off."""
+    xyz, d_noaa = NOAA_POINT[year]
+    b = NoaaBoard(lat=-80.0, h=0.0, roll=4.0, pitch=-7.0, yaw=80.0, mag_heading=0.0, xyz_nt=xyz)
+    opts = ["--date", "2025-01-01"] if how == "--date" else []
+    svc = Service(tmp_path, "--lat", str(b.lat), "--lon", "-120", "--alt", str(b.h), "--heading", "mag",
+                  "--align", "2", "--aiding", "none", *opts)
+    mav = svc.mav()
+    if how == "SYSTEM_TIME":
+        mav.system_time_send(1_814_529_600_000_000, 500)
+    send_rest(mav, b, 1_000_000, 4.0)
+    res = svc.stop()
+    m = re.search(r"magnetic declination (\S+) deg .* from WMM-2025", res.log)
+    assert m and abs(float(m.group(1)) - d_noaa) <= 0.01, res.log
+    assert abs(wrap_deg(res.nav[0, 9] - b.yaw)) <= 0.005 + ANGLE_TOL_DEG, (res.nav[0, 9], res.log)
+
+
+def test_declination_option_overrides_the_model(tmp_path: Path) -> None:
+    """--declination 0 at the same point: the model is not used (no line about it) and the yaw is the
+    magnetic heading of the NOAA field, 80 - atan2(Y, X) (typed components)."""
+    xyz, _ = NOAA_POINT[2025.0]
+    b = NoaaBoard(lat=-80.0, h=0.0, roll=4.0, pitch=-7.0, yaw=80.0, mag_heading=0.0, xyz_nt=xyz)
+    svc = Service(tmp_path, "--lat", str(b.lat), "--lon", "-120", "--alt", str(b.h), "--heading", "mag",
+                  "--align", "2", "--aiding", "none", "--declination", "0")
+    send_rest(svc.mav(), b, 1_000_000, 4.0)
+    res = svc.stop()
+    assert "magnetic declination" not in res.log
+    want = b.yaw - math.degrees(math.atan2(xyz[1], xyz[0]))
+    assert abs(wrap_deg(res.nav[0, 9] - want)) <= ANGLE_TOL_DEG, (res.nav[0, 9], want)
+
+
 # --- --gyro-bias estimate ------------------------------------------------------------------------------
 BIAS_BOARD = Board(lat=47.4, h=500.0, roll=4.0, pitch=-7.0, yaw=80.0, bias_deg_h=(72.0, -108.0, 54.0))
 
@@ -233,7 +288,7 @@ def test_auto_heading_prefers_vehicle_then_mag_then_gyrocompass(tmp_path: Path) 
     lat, h = 50.0, 200.0
     gyro_only = Board(lat=lat, h=h, roll=3.0, pitch=2.0, yaw=120.0)
     with_mag = Board(lat=lat, h=h, roll=3.0, pitch=2.0, yaw=120.0, mag_heading=70.0)  # the magnetometer says 70
-    svc = Service(tmp_path, "--lat", str(lat), "--lon", "10", "--alt", str(h), "--align", "1")
+    svc = Service(tmp_path, "--lat", str(lat), "--lon", "10", "--alt", str(h), "--align", "1", "--declination", "0")
     mav = svc.mav()
     send_rest(mav, gyro_only, 300_000_000, 2.0)
     send_rest(mav, with_mag, 200_000_000, 2.0)

@@ -58,3 +58,40 @@ def test_gps_input_with_non_finite_values_is_rejected() -> None:
                                         0.0, 0.0, 0.0, 0.2, 1.5, 3.0, 12))
     fix = gnss_fix(msg, geoid_height=0.0)
     assert fix is not None and gnss_invalid(fix) == "out_of_range"
+
+
+# --- GPS_RAW_INT / GPS2_RAW ground speed and course -----------------------------------------------
+def _raw_vel(vel: int, cog: int, vel_acc: int = 0, name: str = "GPS_RAW_INT") -> object:
+    if name == "GPS2_RAW":
+        return _decoded(ENC.gps2_raw_encode(7_000_000, 3, LAT, LON, 488000, 80, 120, vel, cog, 12, 0, 0,
+                                            alt_ellipsoid=0, h_acc=0, v_acc=0, vel_acc=vel_acc))
+    return _decoded(ENC.gps_raw_int_encode(7_000_000, 3, LAT, LON, 488000, 80, 120, vel, cog, 12,
+                                           alt_ellipsoid=0, h_acc=0, v_acc=0, vel_acc=vel_acc))
+
+
+@pytest.mark.parametrize("name", ["GPS_RAW_INT", "GPS2_RAW"])
+@pytest.mark.parametrize("vel, cog, vn, ve", [
+    (1000, 0, 10.0, 0.0),          # 10 m/s due north
+    (1000, 9000, 0.0, 10.0),       # due east: cog 90.00 deg
+    (250, 22500, -1.767766952966369, -1.767766952966369),  # 2.5 m/s south-west: 2.5 / sqrt(2) each
+    (0, 31000, 0.0, 0.0),          # standing: any course gives zero velocity
+])
+def test_ground_speed_and_course_give_the_horizontal_velocity(name: str, vel: int, cog: int, vn: float,
+                                                              ve: float) -> None:
+    """common.xml GPS_RAW_INT/GPS2_RAW: ``vel`` ground speed cm/s, ``cog`` course over ground cdeg
+    from true north, clockwise: v_N = vel cos(cog), v_E = vel sin(cog); the vertical is not measured
+    (NaN); its 1-sigma is ``vel_acc`` (mm/s) when given, else the 0.3 m/s default."""
+    fix = gnss_fix(_raw_vel(vel, cog, name=name), geoid_height=0.0)
+    assert fix is not None and gnss_invalid(fix) is None
+    v = fix[4]
+    assert v is not None and abs(v[0] - vn) < 1e-12 and abs(v[1] - ve) < 1e-12 and v[2] != v[2]
+    assert fix[7] == 0.3
+    fix = gnss_fix(_raw_vel(vel, cog, vel_acc=450, name=name), geoid_height=0.0)
+    assert fix is not None and fix[7] == 0.45
+
+
+@pytest.mark.parametrize("vel, cog", [(65535, 0), (100, 65535), (100, 36000)])
+def test_unknown_speed_or_course_gives_no_velocity(vel: int, cog: int) -> None:
+    """UINT16_MAX means unknown (common.xml); a course of 360.00 deg or more is not one: position only."""
+    fix = gnss_fix(_raw_vel(vel, cog), geoid_height=0.0)
+    assert fix is not None and gnss_invalid(fix) is None and fix[4] is None and fix[7] == 0.3

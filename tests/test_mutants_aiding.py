@@ -575,6 +575,38 @@ def test_a_late_velocity_fix_before_the_first_update_is_compared_with_the_curren
     np.testing.assert_allclose(velocity(s), [1.0, 0.0, 0.0], rtol=0, atol=1e-12)  # the 1 s interval: 0.9975
 
 
+def test_ground_speed_fix_corrects_north_and_east_only() -> None:
+    """A fix of (0.2, -0.4, NaN) m/s (GPS_RAW_INT: ground speed and course, nothing vertical) with
+    P_v = R = 0.01 on every axis, the solution at rest with vd = 0.1 m/s: north and east move half way
+    (0.1, -0.2: x = P/(P + R) nu), the vertical velocity and its variance are untouched (a 3-row
+    update with any finite vertical would change both), the variance of north and east halves."""
+    s = state(v=(0.0, 0.0, 0.1))
+    f = live(s, p=vel_var(0.01))
+    f.measure(s, CFG, T0, "gnss", *fix(), (0.2, -0.4, math.nan), 100.0, 100.0, 0.1)
+    assert f.counters["gnss_vel_accepted"] == 1
+    np.testing.assert_allclose(velocity(s), [0.1, -0.2, 0.1], rtol=0, atol=1e-12)
+    vd = em.X_DV + 2
+    assert f.P[vd, vd] == 0.01
+    np.testing.assert_allclose(np.diag(f.P)[em.X_DV:em.X_DV + 2], 0.005, rtol=1e-12)
+    # the ratio: the larger normalised north/east innovation, |0.4| / sqrt(0.02), over the gate 5, squared
+    assert f.ratios["vel"] == pytest.approx(0.16 / 0.02 / 25.0, rel=1e-12)
+
+
+def test_horizontal_rows_are_the_north_and_east_rows_of_a_velocity_model() -> None:
+    """kalman.horizontal_rows keeps rows 0 and 1 of nu and H and the top-left 2x2 of R, as new
+    C-contiguous arrays (the compiled update takes those)."""
+    nu = np.array([1.0, 2.0, 3.0])
+    H = np.arange(3.0 * em.NX).reshape(3, em.NX)
+    R = np.array([[4.0, 0.5, 0.25], [0.5, 5.0, 0.125], [0.25, 0.125, 6.0]])
+    n2, H2, R2 = kf.horizontal_rows(nu, H, R)
+    assert n2.tolist() == [1.0, 2.0]
+    np.testing.assert_array_equal(H2, H[:2])
+    assert R2.tolist() == [[4.0, 0.5], [0.5, 5.0]]
+    assert n2.flags.c_contiguous and H2.flags.c_contiguous and R2.flags.c_contiguous
+    nu[0] = H[0, 0] = R[0, 0] = -1.0  # copies, not views
+    assert n2[0] == 1.0 and H2[0, 0] == 0.0 and R2[0, 0] == 4.0
+
+
 def test_gnss_velocity_rejected_is_counted() -> None:
     """A velocity fix 1 m/s off with S = 0.01 + 0.01 (7 sigma) is rejected: gnss_vel_rejected, velocity kept."""
     s = state()
@@ -760,7 +792,8 @@ def test_uncertainty_gyro_sigma_includes_the_cross_covariance() -> None:
 
 def test_warm_measurements_runs_every_kind_once() -> None:
     """The warm-up (service.warm_up) starts a filter with every aiding kind and applies one measurement of each at
-    the state's time: each kind's update runs once (accepted or rejected)."""
+    the state's time: each kind's update runs once (accepted or rejected), GNSS twice (a NED velocity, and a
+    ground speed with no vertical: both velocity models compile)."""
     made = []
 
     class Recording(LiveFilter):
@@ -776,5 +809,5 @@ def test_warm_measurements_runs_every_kind_once() -> None:
         mp.undo()
     (f,) = made
     assert f.settings.aiding == AIDING_KINDS
-    for kind in ("gnss_pos", "gnss_vel", "baro", "mag", "zupt"):
-        assert f.counters[f"{kind}_accepted"] + f.counters[f"{kind}_rejected"] == 1, kind
+    for kind, n in (("gnss_pos", 2), ("gnss_vel", 2), ("baro", 1), ("mag", 1), ("zupt", 1)):
+        assert f.counters[f"{kind}_accepted"] + f.counters[f"{kind}_rejected"] == n, kind

@@ -36,8 +36,9 @@ def wire(make, sysid: int = 1, compid: int = 1):
 
 
 def raw_int(fix=3, lat=473977420, lon=85455940, alt=488_000, eph=120, epv=200, alt_e=0, h_acc=0, v_acc=0,
-            t_us=5_000_000, **kw):
-    return wire(lambda m: m.gps_raw_int_encode(t_us, fix, lat, lon, alt, eph, epv, 0, 0, 12, alt_e, h_acc, v_acc,
+            t_us=5_000_000, vel=65535, cog=65535, **kw):
+    """GPS_RAW_INT; ground speed and course unknown (UINT16_MAX) unless given."""
+    return wire(lambda m: m.gps_raw_int_encode(t_us, fix, lat, lon, alt, eph, epv, vel, cog, 12, alt_e, h_acc, v_acc,
                                                0, 0), **kw)
 
 
@@ -58,7 +59,7 @@ def test_gps_raw_int_amsl_and_dop():
     assert t == pytest.approx(5.0, abs=1e-12)
     assert lat == pytest.approx(47.397742, abs=1e-12) and lon == pytest.approx(8.545594, abs=1e-12)
     assert h == pytest.approx(488.0 + 47.5, abs=1e-9)  # AMSL + geoid height
-    assert vel is None  # GPS_RAW_INT has no vertical velocity: position only
+    assert vel is None  # speed and course unknown: position only
     assert (sh, sv, svel) == (SIGMA_H, SIGMA_V, SIGMA_VEL)  # no h_acc/v_acc: the defaults
 
 
@@ -153,6 +154,7 @@ def test_a_good_fix_is_valid():
     assert pl.gnss_invalid(fix_with(sh=50.0, sv=50.0)) is None  # at most 50 m
     assert pl.gnss_invalid(fix_with(svel=1e-3)) is None
     assert pl.gnss_invalid(fix_with(svel=1e3)) is None  # no upper bound on the velocity accuracy
+    assert pl.gnss_invalid(fix_with(vel=(1.0, -2.0, math.nan))) is None  # ground speed: no vertical
 
 
 @pytest.mark.parametrize("kw", [dict(lat=90.0001), dict(lat=-90.0001), dict(lon=180.0001), dict(lon=-180.0001),
@@ -206,6 +208,9 @@ class FakeEngine:
 
     def set_vehicle_yaw(self, *a):
         self.calls.append(("yaw", a))
+
+    def set_date(self, *a):
+        self.calls.append(("date", a))
 
     def on_imu(self, smp):
         self.calls.append(("imu", smp.t))
@@ -298,6 +303,41 @@ def test_baro(pipe):
     pipe.handle(wire(lambda m: m.scaled_pressure_encode(1_500, -5.0, 0.0, 2000)))
     pipe.handle(wire(lambda m: m.scaled_pressure_encode(1_500, math.nan, 0.0, 2000)))
     assert len(pipe.engine.calls) == n
+
+
+SITL_US = 1_732_838_400_123_456  # an IMU clock in UNIX microseconds (PX4 SITL: 2024-11-29T00:00:00.123456Z)
+WRAP_MS = 2**32  # SCALED_PRESSURE.time_boot_ms is uint32 ms (common.xml)
+
+
+@pytest.mark.parametrize("dt_ms", [-1500, 0, 2000])
+def test_baro_on_a_unix_time_clock_is_unwrapped_to_the_imu_clock(pipe, dt_ms):
+    """An autopilot whose clock is UNIX time sends time_boot_ms modulo 2^32 ms; with the IMU's uint64
+    time the high part comes back: a pressure sampled dt before/at/after the last IMU sample reaches
+    the engine stamped on the IMU clock (not 'now', not dropped). Expected: (SITL_US/1000 + dt) ms."""
+    pipe.handle(highres(SITL_US))
+    ms = SITL_US // 1000 + dt_ms
+    pipe.handle(wire(lambda m: m.scaled_pressure_encode(ms % WRAP_MS, 898.76, 0.0, 2000)))
+    name, (t, h, sigma) = pipe.engine.calls[-1]
+    assert name == "baro" and t == pytest.approx(ms * 1e-3, abs=1e-6)
+
+
+def test_baro_just_after_the_millisecond_field_wrapped(pipe):
+    """The IMU at 2^32 ms - 0.5 s, the pressure 1 s later has wrapped to 500 ms: it is 0.5 s after the
+    wrap (2^32 ms + 500 ms), and the reverse: IMU just after the wrap, pressure just before it."""
+    pipe.handle(highres((WRAP_MS - 500) * 1000))
+    pipe.handle(wire(lambda m: m.scaled_pressure_encode(500, 898.76, 0.0, 2000)))
+    assert pipe.engine.calls[-1][1][0] == pytest.approx((WRAP_MS + 500) * 1e-3, abs=1e-9)
+    pipe.handle(highres((WRAP_MS + 700) * 1000))
+    pipe.handle(wire(lambda m: m.scaled_pressure_encode(WRAP_MS - 300, 898.76, 0.0, 2000)))
+    assert pipe.engine.calls[-1][1][0] == pytest.approx((WRAP_MS - 300) * 1e-3, abs=1e-9)
+
+
+def test_system_time_gives_the_engine_the_date(pipe):
+    """SYSTEM_TIME.time_unix_usec (us) goes to the engine as UNIX seconds; 0 (no time yet) does not."""
+    pipe.handle(wire(lambda m: m.system_time_encode(0, 1000)))
+    assert pipe.engine.calls == []
+    pipe.handle(wire(lambda m: m.system_time_encode(1_751_457_600_000_000, 1000)))
+    assert pipe.engine.calls == [("date", (1_751_457_600.0,))]
 
 
 def test_global_position_int(pipe):

@@ -659,14 +659,19 @@ def test_gps_raw_int_field_ranges_at_their_ends() -> None:
 
 
 def test_scaled_pressure_ranges_at_their_ends() -> None:
-    """Any positive pressure is sent; temperature cdegC fits int16 or is 0; time_boot_ms fits uint32."""
+    """Any positive pressure is sent; temperature cdegC fits int16 or is 0; time_boot_ms is the IMU clock's
+    milliseconds modulo 2^32 (uint32, as an autopilot with a UNIX-time clock sends it: PX4 SITL), so a
+    time past 2^32 ms wraps instead of losing the barometer; a negative time is refused."""
     enc, dec = codec()
     b = replay.scaled_pressure(enc, dec, (2**32 - 1) * 1000 + 999, 0.5, -327.68)
     assert (b.time_boot_ms, b.press_abs, b.press_diff, b.temperature) == (2**32 - 1, pytest.approx(0.005), 0.0, -32768)
+    assert replay.scaled_pressure(enc, dec, 2**32 * 1000, 1.0, 0.0).time_boot_ms == 0
+    sitl_us = 1_732_838_400_123_456  # 2024-11-29T00:00:00.123456Z in us
+    assert replay.scaled_pressure(enc, dec, sitl_us, 1.0, 0.0).time_boot_ms == 1_732_838_400_123 % 2**32
     assert replay.scaled_pressure(enc, dec, 0, 1.0, 327.67).temperature == 32767
     assert replay.scaled_pressure(enc, dec, 0, 1.0, 327.68).temperature == 0
     assert replay.scaled_pressure(enc, dec, 0, 1.0, -327.69).temperature == 0
-    for t_us, p in [(2**32 * 1000, 1.0), (0, 0.0), (0, -1.0), (0, math.inf), (0, math.nan)]:
+    for t_us, p in [(-1000, 1.0), (0, 0.0), (0, -1.0), (0, math.inf), (0, math.nan)]:
         with pytest.raises(ValueError):
             replay.scaled_pressure(enc, dec, t_us, p, 0.0)
 
@@ -886,11 +891,16 @@ def test_ulog_magnetometer_without_its_fields_and_repeated_nan(tmp_path: Path) -
 # reaction) and no rotation, 100 Hz from sensor time 1.00 s. With --lat/--lon/--alt given, --align 0.5
 # and --rate 10 the alignment ends at 1.50 s and rows follow at 10 Hz until the last sample at 1.99 s.
 
+from mavins.aiding import FilterSettings  # noqa: E402
 from mavins.engine import EngineConfig  # noqa: E402
 from mavins.link.ingest import IngestConfig  # noqa: E402
 
 G_STD = 9.80665
 AT_REST = dict(lat=10.0, lon=20.0, alt=30.0, align=0.5, heading=0.0, rate=10.0)
+# docs/conventions.md: the navigation-solution columns, and the filter's after them (typed from the contract)
+SOLUTION_HEADER = "t,lat,lon,h,vn,ve,vd,roll,pitch,yaw,qw,qx,qy,qz"
+FILTER_HEADER = ("sigma_n,sigma_e,sigma_d,sigma_vn,sigma_ve,sigma_vd,sigma_att_n,sigma_att_e,sigma_att_d,"
+                 "bg_x,bg_y,bg_z,ba_x,ba_y,ba_z,sigma_bg_x,sigma_bg_y,sigma_bg_z,sigma_ba_x,sigma_ba_y,sigma_ba_z")
 NO_GNSS_NOTE = ("note: no GNSS message in the log (GPS_RAW_INT, GPS_INPUT, HIL_GPS; PX4 vehicle_gps_position/"
                 "sensor_gps, ArduPilot GPS): the position is free inertial")
 ANY_IMU = "IMU messages (HIGHRES_IMU, RAW_IMU, SCALED_IMU*)"
@@ -918,8 +928,10 @@ def test_replay_at_rest_writes_a_row_per_output_and_counts_everything(tmp_path: 
     res = replay.replay(log, EngineConfig(**AT_REST), IngestConfig(), out,
                         on_output=lambda sol, pipe: seen.append((float(sol.row[0]), pipe)))
     lines = out.read_text().splitlines()
-    assert lines[0] == "t,lat,lon,h,vn,ve,vd,roll,pitch,yaw,qw,qx,qy,qz"
+    assert lines[0] == SOLUTION_HEADER + "," + FILTER_HEADER  # it aids (the default): the filter's columns too
     rows = [[float(x) for x in line.split(",")] for line in lines[1:]]
+    # no fix: the position's 1-sigma starts at the filter's 10 m (docs/filter.md) and only grows
+    assert all(len(r) == 35 and r[14] >= 10.0 and r[15] >= 10.0 and all(map(math.isfinite, r)) for r in rows)
     assert (res.messages, res.t_first, res.t_last) == (100, 1.0, 1.99)
     assert res.outputs == len(rows) == len(seen) and res.outputs >= 4  # at least 1.6, 1.7, 1.8, 1.9 s
     assert [t for t, _ in seen] == [r[0] for r in rows]
@@ -930,6 +942,15 @@ def test_replay_at_rest_writes_a_row_per_output_and_counts_everything(tmp_path: 
     assert res.pipeline.take_events() == []  # drained after every message
     assert res.aiding == {} and res.report is not None and res.report.notes == [NO_GNSS_NOTE]
     assert res.report.lines() == [f"{log}: {NO_GNSS_NOTE}"]
+
+
+def test_replay_without_aiding_writes_the_solution_columns_only(tmp_path: Path) -> None:
+    """--aiding none: no filter, the 14 solution columns (docs/conventions.md)."""
+    log = write(tmp_path, "rest.tlog", rest_records(100))
+    out = tmp_path / "nav.csv"
+    replay.replay(log, EngineConfig(**AT_REST, filter=FilterSettings(aiding=())), IngestConfig(), out)
+    lines = out.read_text().splitlines()
+    assert lines[0] == SOLUTION_HEADER and all(len(line.split(",")) == 14 for line in lines[1:])
 
 
 def test_replay_without_an_output_file_still_counts_outputs(tmp_path: Path) -> None:

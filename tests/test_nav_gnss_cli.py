@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import json
 import math
 from pathlib import Path
 
@@ -100,7 +101,7 @@ def flight(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """120 s of the flight scenario, consumer grade, 1 Hz GNSS, baro and a 10 Hz magnetometer (mag.csv)."""
     out = tmp_path_factory.mktemp("mag") / "sim"
     code, err = run("sim", "flight", "--duration", "120", "--grade", "consumer", "--seed", "3", "--mag-rate", "10",
-                    "-o", out)
+                    "--date", MAG_DATE, "-o", out)
     assert code == 0, err
     return out
 
@@ -124,27 +125,41 @@ def _heading_errors(flight: Path, nav: np.ndarray) -> np.ndarray:
     return np.degrees(quat_error(nav[:, 10:14], truth[i, q:q + 4])[:, 2])
 
 
+MAG_DATE = "2025-01-01"  # the simulated field's date: decimal year 2025.0
+
+
+def _wmm(flight: Path):  # type: ignore[no-untyped-def]
+    """The World Magnetic Model's field at the flight's start on MAG_DATE, from the model's package itself
+    (pygeomag, checked against NOAA's test values in test_magmodel.py), not through mavins."""
+    from pygeomag import GeoMag
+
+    init = json.loads((flight / "init.json").read_text())
+    return GeoMag(base_year=2025.0).calculate(glat=init["lat"], glon=init["lon"], alt=init["h"] / 1000.0, time=2025.0)
+
+
 def test_sim_writes_a_magnetometer_file(flight: Path) -> None:
-    """mag.csv: t,mx,my,mz,sigma at 10 Hz; the field's strength is the simulator's 48 uT within its noise, and
-    sigma the heading noise of 0.3 uT across the 48 cos 63 deg = 21.8 uT horizontal field."""
+    """mag.csv: t,mx,my,mz,sigma at 10 Hz; the field's strength is the World Magnetic Model's at the start on
+    --date (F nT -> uT) within its noise (0.3 uT per axis over 1200 samples: 0.01 uT standard error), and sigma
+    the heading noise of 0.3 uT across its horizontal field H."""
     header, mag = _table(flight / "mag.csv")
     assert header == ["t", "mx", "my", "mz", "sigma"]
     np.testing.assert_allclose(np.diff(mag[:, 0]), 0.1, atol=1e-9)
-    assert abs(np.mean(np.linalg.norm(mag[:, 1:4], axis=1)) - 48.0) < 0.1
-    np.testing.assert_allclose(mag[:, 4], math.degrees(0.3 / (48.0 * math.cos(math.radians(63.0)))), rtol=1e-12)
+    f = _wmm(flight)
+    assert abs(np.mean(np.linalg.norm(mag[:, 1:4], axis=1)) - f.f / 1000.0) < 0.1
+    np.testing.assert_allclose(mag[:, 4], math.degrees(0.3 / (f.h / 1000.0)), rtol=1e-9)
 
 
 def test_magnetometer_file_aids_the_heading(flight: Path, tmp_path: Path) -> None:
-    """With --mag and the simulator's declination (2 deg) every sample up to the last update is accepted and the
-    heading error after
+    """With --mag and the default declination (the World Magnetic Model's at the start on --date, the simulator's
+    field) every sample up to the last update is accepted and the heading error after
     the first 60 s falls well below that of GNSS and baro alone (the turns alone leave it drifting with the
     gyro's bias between them). A declination 2 deg too small moves the heading by the magnetometer's share of
     those 2 deg: the filter weighs the magnetometer (10 Hz of 0.79 deg) against what the turns tell, so the
-    estimate lies between them and, the magnetometer dominating, more than half way: yaw(0) - yaw(2) in
+    estimate lies between them and, the magnetometer dominating, more than half way: yaw(D - 2) - yaw(D) in
     (-2, -1) deg (the heading moves so that the field's azimuth is the declination given)."""
     _, _, plain = _flight_nav(flight, tmp_path / "plain.csv")
     err, header, with_mag = _flight_nav(flight, tmp_path / "mag.csv", "--mag", flight / "mag.csv",
-                                        "--declination", "2")
+                                        "--date", MAG_DATE)
     n_mag = int(np.sum(_table(flight / "mag.csv")[1][:, 0] <= with_mag[-1, 0]))  # those the solution reached
     assert n_mag >= 1199
     assert f"mavins nav: mag: {n_mag} accepted, 0 rejected (gate 5 sigma)" in err
@@ -152,7 +167,8 @@ def test_magnetometer_file_aids_the_heading(flight: Path, tmp_path: Path) -> Non
     rms_plain = math.sqrt(np.mean(_heading_errors(flight, plain)[late] ** 2))
     rms_mag = math.sqrt(np.mean(_heading_errors(flight, with_mag)[late] ** 2))
     assert rms_mag < 0.75 * rms_plain, (rms_mag, rms_plain)
-    _, _, wrong = _flight_nav(flight, tmp_path / "mag0.csv", "--mag", flight / "mag.csv")
+    _, _, wrong = _flight_nav(flight, tmp_path / "mag0.csv", "--mag", flight / "mag.csv",
+                              "--declination", str(_wmm(flight).d - 2.0))
     yaw = header.index("yaw")
     shift = float(np.mean(wrap_deg(wrong[late, yaw] - with_mag[late, yaw])))
     assert -2.0 < shift < -1.0, shift

@@ -56,19 +56,26 @@ def test_ulog_records_become_fixes_in_the_logs_units() -> None:
     eph 3.2600002, epv 6.984 (m), timestamp 20471648 (us); vehicle_air_data
     baro_pressure_pa 100294.49 (Pa), timestamp_sample 20305864 (us); vehicle_magnetometer
     magnetometer_ga 0.42917827, -0.11418437, -0.05181336 (gauss) at 20310847 us, before the first
-    sensor_combined sample (20326716 us)."""
+    sensor_combined sample (20326716 us). The fix's vel_m_s 0.07600001 and cog_rad 0.57123244 go into
+    GPS_RAW_INT as 8 cm/s and 3273 cdeg (32.7292 deg rounded), s_variance_m_s 0.651 as vel_acc 651 mm/s;
+    its time_utc_usec 1618986658600345 (2021-04-21T06:30:58.600345Z) as a SYSTEM_TIME with
+    time_boot_ms 20471."""
     first: dict[str, object] = {}
     messages, report = open_log(LOG)
     for _, msg in messages:
         first.setdefault(msg.get_type(), msg)
-        if len(first) == 3:
+        if len(first) == 4:
             break
     gps, baro, imu = first["GPS_RAW_INT"], first["SCALED_PRESSURE"], first["HIGHRES_IMU"]
-    t, lat, lon, h, vel, sig_h, sig_v, _ = gnss_fix(gps, geoid_height=0.0)  # type: ignore[misc]
+    date = first["SYSTEM_TIME"]
+    assert date.time_unix_usec == 1618986658600345 and date.time_boot_ms == 20471  # type: ignore[attr-defined]
+    t, lat, lon, h, vel, sig_h, sig_v, sig_vel = gnss_fix(gps, geoid_height=0.0)  # type: ignore[misc]
     assert t == pytest.approx(20.471648, abs=1e-6)
     assert (lat, lon) == (pytest.approx(63.4170622, abs=1e-9), pytest.approx(10.4082151, abs=1e-9))
     assert h == pytest.approx(106.766, abs=1e-3)  # the ellipsoidal height, not alt (66.814 m AMSL)
-    assert vel is None  # GPS_RAW_INT carries no NED velocity
+    cog = math.radians(32.73)
+    assert vel[:2] == (pytest.approx(0.08 * math.cos(cog), abs=1e-12), pytest.approx(0.08 * math.sin(cog), abs=1e-12))
+    assert math.isnan(vel[2]) and sig_vel == pytest.approx(0.651, abs=1e-12)  # ground speed: nothing vertical
     assert (sig_h, sig_v) == (pytest.approx(3.26, abs=1e-3), pytest.approx(6.984, abs=1e-3))
     assert baro.press_abs == pytest.approx(1002.9449, abs=1e-3)  # hPa  # type: ignore[attr-defined]
     assert baro.time_boot_ms == 20305  # type: ignore[attr-defined]

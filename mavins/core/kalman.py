@@ -349,6 +349,14 @@ def gnss_velocity(
 
 
 @kernel
+def horizontal_rows(nu: np.ndarray, H: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The north and east rows of a NED velocity model (nu, H, R): a GNSS that gives ground speed
+    and course only (GPS_RAW_INT ``vel``, ``cog``) measures ``v_N = |v_h| cos(cog)``,
+    ``v_E = |v_h| sin(cog)`` and nothing vertical."""
+    return nu[:2].copy(), H[:2, :].copy(), R[:2, :2].copy()
+
+
+@kernel
 def baro_height(
     s: np.ndarray, bias: np.ndarray, h_m: float, dt: float, sigma: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
