@@ -47,6 +47,7 @@ class FilterSettings:
     sigma_mag: float = 3.0  # deg of heading
     sigma_zupt: float = 0.02  # m/s
     predict_dt: float = 0.01  # s: the covariance is propagated at about this interval
+    delays: dict[str, float] = field(default_factory=dict)  # s by kind (gnss, baro, mag): measured this long before its stamp
 
 
 @dataclass
@@ -189,9 +190,12 @@ class LiveFilter:
     def measure(self, s: np.ndarray, cfg: np.ndarray, t_m: float, kind: str, *args: object) -> None:
         """A measurement stamped t_m (s, IMU clock): applied now if the solution has passed it,
         else when it does. Kinds: ``gnss`` (lat, lon rad, h m, vel NED or None, sigma_h, sigma_v,
-        sigma_vel), ``baro`` (h m, sigma), ``mag`` (m_b body), ``zupt`` ()."""
+        sigma_vel), ``baro`` (h m, sigma), ``mag`` (m_b body), ``zupt`` (). A kind with a delay
+        (``--gnss-delay`` ...) was measured that long before t_m and is fused at that time: taken back
+        along the solution like any measurement older than the last attitude update (kalman.py)."""
         if kind not in self.settings.aiding:
             return
+        t_m -= self.settings.delays.get(kind, 0.0)
         if t_m > sd.state_time(s):
             if len(self._pending) < 64:
                 self._pending.append((t_m, kind, args))

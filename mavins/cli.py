@@ -206,6 +206,18 @@ def _filter_options(g: argparse._ArgumentGroup, with_aiding: bool = True) -> Non
                    help="reject a measurement whose normalised innovation exceeds N sigma")
     g.add_argument("--lever-arm", type=_Vec3(), default="0,0,0", metavar="X,Y,Z",
                    help="GNSS antenna position from the IMU, body frame FRD (m)")
+    for kind, what in DELAYED:
+        g.add_argument(f"--{kind}-delay", type=_real(0.0, 1000.0), default=0.0, metavar="MS",
+                       help=f"the {what} stamped t was measured MS ms earlier, at t - MS/1000, and is fused at that "
+                            "time (default 0: the stamp is the time of measurement)")
+
+
+DELAYED = (("gnss", "GNSS fix"), ("baro", "barometric height"), ("mag", "magnetometer sample"))  # --KIND-delay
+
+
+def _delays(args: argparse.Namespace) -> dict[str, float]:
+    """--gnss-delay, --baro-delay, --mag-delay (ms) as seconds by aiding kind (the ones given, non-zero)."""
+    return {k: getattr(args, f"{k}_delay") / 1000.0 for k, _ in DELAYED if getattr(args, f"{k}_delay", 0.0)}
 
 
 def _imu_spec(args: argparse.Namespace, extra_keys: tuple[str, ...] = ()) -> str | dict:
@@ -361,7 +373,7 @@ def _cmd_nav(args: argparse.Namespace) -> int:
 
             rows, counts = run_nav_aided(args.imu[0], args.init, args.output, opts,
                                          AidingFiles(args.gnss, args.baro, args.mag, args.declination,
-                                                     tuple(args.rest or ()), args.date),
+                                                     tuple(args.rest or ()), args.date, _delays(args)),
                                          _imu_spec(args), args.lever_arm, args.gate)
             for kind, (ok, bad) in counts.items():
                 if ok or bad:
@@ -662,7 +674,8 @@ def _engine_config(args: argparse.Namespace):  # type: ignore[no-untyped-def]
         pass
     from .aiding import FilterSettings
 
-    flt = FilterSettings(spec=_imu_spec(args), aiding=args.aiding, gate=args.gate, lever_arm=args.lever_arm)
+    flt = FilterSettings(spec=_imu_spec(args), aiding=args.aiding, gate=args.gate, lever_arm=args.lever_arm,
+                         delays=_delays(args))
     from .core.settings import strapdown_from_options
 
     strapdown = strapdown_from_options(args)

@@ -140,6 +140,7 @@ class AidingFiles:
     declination: float | None = None
     rest: tuple[tuple[float, float], ...] = ()
     year: float | None = None
+    delays: dict[str, float] = field(default_factory=dict)  # s by kind (gnss, baro, mag): measured before the t column
 
     def declination_at(self, lat_deg: float, lon_deg: float, h_m: float) -> float:
         """The declination (deg) to use at the initial position: the given one, else the model's."""
@@ -265,6 +266,9 @@ def run_nav_aided(imu_path: Path, init_path: Path, out_path: Path, opts: NavOpti
     gnss = read_aiding(aiding.gnss, GNSS_REQUIRED, GNSS_OPTIONAL, no_fix_rows=True) if aiding.gnss is not None else None
     baro = read_aiding(aiding.baro, BARO_REQUIRED, BARO_OPTIONAL) if aiding.baro is not None else None
     mag = read_aiding(aiding.mag, MAG_REQUIRED, MAG_OPTIONAL) if aiding.mag is not None else None
+    for kind, table in (("gnss", gnss), ("baro", baro), ("mag", mag)):  # --KIND-delay: measured at t - delay
+        if table is not None and aiding.delays.get(kind, 0.0):
+            table[:, 0] -= aiding.delays[kind]
     if mag is not None and np.any(mag[:, 4] <= 0.0):
         row = int(np.argmax(mag[:, 4] <= 0.0))
         raise files.DataFileError(f"{aiding.mag}: line {row + 2}, column 'sigma': must be positive (deg of "

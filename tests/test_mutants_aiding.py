@@ -508,6 +508,36 @@ def test_late_gnss_fix_is_taken_back_along_the_velocity() -> None:
     assert not f.uncertainty(math.nextafter(T0 - 0.25 + 5.0, NEXT), 0).abs_pos
 
 
+def test_gnss_delay_fuses_a_fix_at_its_stamp_minus_the_delay() -> None:
+    """--gnss-delay 250: the same fix as above (-1.5 m N, taken 0.25 s before t0) stamped t0, the time it arrived:
+    it is taken back along the velocity over the delay exactly as a fix stamped t0 - 0.25, so the solution moves
+    to -0.5 m N (half of nu = 1 m; docs/conventions.md "Sensor delays"). Without the delay, the fix stamped t0
+    reads as 1.5 m behind the solution: -0.75 m. The delay of one kind leaves the others alone."""
+    s = state(v=(2.0, 0.0, 0.0))
+    f = live(s, p=pos_var(4.0), delays={"gnss": 0.25})
+    f.measure(s, CFG, T0, "gnss", *fix(-1.5), None, 2.0, 2.0, 0.3)
+    np.testing.assert_allclose(offset(s), [-0.5, 0.0, 0.0], rtol=0, atol=1e-8)
+    assert f.uncertainty(T0 - 0.25 + 5.0, 0).abs_pos and not f.uncertainty(T0 + 5.0, 0).abs_pos
+    s = state(v=(2.0, 0.0, 0.0))
+    f = live(s, p=pos_var(4.0))
+    f.measure(s, CFG, T0, "gnss", *fix(-1.5), None, 2.0, 2.0, 0.3)
+    np.testing.assert_allclose(offset(s), [-0.75, 0.0, 0.0], rtol=0, atol=1e-8)
+
+
+@pytest.mark.parametrize("kind", ["baro", "mag"])
+def test_baro_and_magnetometer_delays_shift_only_their_own_kind(kind: str) -> None:
+    """--baro-delay / --mag-delay 500: a measurement stamped t0 + 0.5 is applied now (measured at t0), one of the
+    other kind stamped t0 + 0.5 waits for the update that passes t0 + 0.5."""
+    other = "mag" if kind == "baro" else "baro"
+    args = {"baro": (H0, 0.5), "mag": ((0.2, 0.0, 0.4),)}
+    s = state()
+    f = live(s, delays={kind: 0.5})
+    f.measure(s, CFG, T0 + 0.5, kind, *args[kind])
+    assert f.counters[f"{kind}_accepted"] + f.counters[f"{kind}_rejected"] == 1 and not f._pending
+    f.measure(s, CFG, T0 + 0.5, other, *args[other])
+    assert [p[:2] for p in f._pending] == [(T0 + 0.5, other)]
+
+
 def test_resets_count_horizontal_corrections_above_one_metre() -> None:
     """JUMP_M = 1 m: corrections of 0.9 m (north) and of 2 m down are not discontinuities, 1.1 m east is
     (gain 1/2: fixes 1.8 m, 4 m, 2.2 m off), then 1.5 m north is another."""
