@@ -86,6 +86,7 @@ class LiveFilter:
         self._t_prev_k = 0.0
         self._T_k = 0.0  # s: the last attitude interval (velocity fixes are interpolated over it)
         self._incl = np.zeros(2)  # sum and count of tan(inclination) of the accepted magnetometer samples
+        self.free = kalman.ALL  # the states an update may correct (kalman.update); the engine holds the heading back
         self._bind(sd.GEOGRAPHIC)
 
     def _bind(self, frame: int) -> None:
@@ -145,6 +146,8 @@ class LiveFilter:
             return min(1.0, self.settings.sigma_yaw)  # an autopilot EKF heading: about 1 deg
         if source == "magnetometer":
             return min(5.0, self.settings.sigma_yaw)
+        if source == "GNSS velocity (pending)":  # engine.GNSS_YAW_PENDING: any heading, uniform on the circle
+            return 180.0 / math.sqrt(3.0)
         if source == "gyrocompass":
             horiz = earth.OMEGA * max(math.cos(lat), 1e-3)
             return min(30.0, max(0.05, math.degrees(math.atan(self.spec[errmodel.SP_GYRO_BIAS] / horiz))))
@@ -248,7 +251,7 @@ class LiveFilter:
                 model: tuple[np.ndarray, np.ndarray, np.ndarray]) -> bool:
         """Apply one measurement model (nu, H, R) with the gate, count it, keep its test ratio."""
         nu, H, R = model
-        _, ratio, ok = kalman.apply_update(s, cfg, self.bias, self.P, H, nu, R, self.settings.gate, kalman.ALL)
+        _, ratio, ok = kalman.apply_update(s, cfg, self.bias, self.P, H, nu, R, self.settings.gate, self.free)
         self.counters[f"{kind}_{'accepted' if ok else 'rejected'}"] += 1
         for key in ratio_keys:
             self.ratios[key] = ratio * ratio
@@ -299,4 +302,12 @@ def warm_measurements() -> None:
                        ("gnss", (math.radians(45.0), math.radians(7.0), 100.0, (0.0, 0.0, math.nan), 1.0, 2.0, 0.3)),
                        ("baro", (100.0, 0.5)), ("mag", ((0.2, 0.0, 0.4),))):
         f.measure(s, cfg, 0.0, kind, *args)
+    # the heading from GNSS velocity (engine.GNSS_YAW_PENDING): the yaw bank and the reset
+    from .core import yawgsf
+
+    X, P, logw = yawgsf.make(0.0, 0.0)
+    yawgsf.predict(X, P, np.array([0.01, 0.0, -0.098]), np.zeros(3), 0.0, 0.0, 0.0, 0.01)
+    yawgsf.update(X, P, logw, 0.0, 0.0, 0.3)
+    yawgsf.estimate(X, P, logw)
+    kalman.yaw_reset(s, cfg, f.bias, f.P, 0.0, 1e-3, math.radians(45.0), math.radians(7.0), 1.0, 0.0, 0.0, 0.1)
 

@@ -17,7 +17,7 @@ from typing import Callable
 
 import numpy as np
 
-from .core import align, earth, magmodel
+from .core import align, earth, kalman, magmodel, yawgsf
 from .core import strapdown as sd
 from .core.jit import for_frame
 from .core.records import ImuSample, Solution
@@ -33,6 +33,10 @@ class State(str, Enum):
 
 
 HEADING_WORDS = ("auto", "gyrocompass", "mag", "vehicle")
+GNSS_YAW = "GNSS velocity"  # the heading source once the yaw estimator (core/yawgsf.py) has converged
+GNSS_YAW_PENDING = "GNSS velocity (pending)"  # aligned without a heading source: yaw unknown until the vehicle moves
+GSF_RESET_SIGMA_DEG = 5.0  # deg: the estimator's yaw 1-sigma below which the solution's heading is reset to it
+GSF_MOVING_MS = 1.0  # m/s: while the yaw is pending, faster fixes are not fused (the heading is unknown)
 MAX_HEIGHT = 1.0e6  # m: beyond this (either sign) the solution has diverged
 MAX_SPEED = 1.0e4  # m/s: likewise
 
@@ -108,6 +112,9 @@ class Engine:
     _row: np.ndarray = field(init=False, default_factory=lambda: np.zeros(sd.OUT_SIZE))
     _unix_date: float | None = field(init=False, default=None)  # s: UNIX time the stream reported (SYSTEM_TIME)
     declination: float = field(init=False, default=0.0)  # deg: the one used by the alignment and the filter
+    _gsf: tuple[np.ndarray, np.ndarray, np.ndarray] | None = field(init=False, default=None)  # yaw bank (X, P, logw)
+    _gsf_inc: list[float] = field(init=False, default_factory=lambda: [0.0] * 7)  # dv_b, dtheta_b, dt since the update
+    _gsf_t: float = field(init=False, default=0.0)  # s: time of the last sample integrated into _gsf_inc
 
     def __post_init__(self) -> None:
         h = self.cfg.heading
@@ -272,6 +279,14 @@ class Engine:
         )
         self.filter.start(self._s, self._kcfg, self.gyro_bias, self._dt_nominal or 0.01, self._pos_sigma, source,
                           math.radians(lat), smp.t - self._t_align0 if self.gyro_bias.any() else 0.0)
+        self._gsf = yawgsf.make(0.0, 0.0) if source == GNSS_YAW_PENDING else None
+        # an unknown heading is not learnt by the filter's linear updates (a consider state) until the reset
+        self.filter.free = kalman.ALL_BUT_HEADING if self._gsf is not None else kalman.ALL
+        self._gsf_inc = [0.0] * 7
+        self._gsf_t = smp.t
+        if self._gsf is not None:
+            self._event("INFO", "heading unknown (no magnetometer, no vehicle heading, gyros too coarse to "
+                                "gyrocompass): estimated from GNSS velocity once the vehicle moves")
         self._still_since = None
         self._next_zupt = self._next_mag = -math.inf
         if self.gyro_bias.any():
@@ -294,13 +309,19 @@ class Engine:
             if has_mag:
                 return align.mag_heading(m_mean, roll, pitch, math.radians(self.declination)), "magnetometer"
             self._event("WARNING", "no magnetometer data: heading from gyrocompass")
-        return align.gyrocompass(w_mean, roll, pitch), "gyrocompass"
+        yaw = align.gyrocompass(w_mean, roll, pitch)
+        if h == "auto" and "gnss" in self.cfg.filter.aiding and self.cfg.frame == "geographic" \
+                and self.filter.yaw_sigma_deg("gyrocompass", math.radians(self._pos[0])) > GSF_RESET_SIGMA_DEG:  # type: ignore[index]
+            return yaw, GNSS_YAW_PENDING  # gyrocompassing cannot beat the yaw estimator: it takes over
+        return yaw, "gyrocompass"
 
     def _nav_step(self, smp: ImuSample) -> Solution | None:
         s = self._s
         flt = self.filter
         r = flt.push(s, self._kcfg, smp.t, smp.gyro, smp.accel)  # type: ignore[arg-type]
         self._mag_from_sample(smp)  # any sample may carry one: it waits for the update that passes it
+        if self._gsf is not None:
+            self._gsf_sample(smp, r == 1)
         if r != 1:
             return None
         self._gyro_last = flt.body_rate(smp.gyro)  # the update's last sample, bias removed (published, ZUPT)
@@ -325,6 +346,28 @@ class Engine:
             return None
         return Solution(self._row.copy(), np.array(self._gyro_last), self._pos, self.degraded,  # type: ignore[arg-type]
                         flt.uncertainty(t, self.counters["restarts"]))
+
+    def _gsf_sample(self, smp: ImuSample, update: bool) -> None:
+        """Sum the sample's bias-corrected increments (rectangle rule over the interval since the last one)
+        for the yaw estimator and propagate it at each attitude update, at the solution's level."""
+        dt = smp.t - self._gsf_t
+        self._gsf_t = smp.t
+        inc = self._gsf_inc
+        if 0.0 < dt <= self.cfg.max_gap:
+            w = self.filter.body_rate(smp.gyro)
+            ba = self.filter.accel_bias
+            for i in range(3):
+                inc[i] += (smp.accel[i] - ba[i]) * dt
+                inc[3 + i] += w[i] * dt
+            inc[6] += dt
+        if update and inc[6] > 0.0:
+            X, P, _ = self._gsf  # type: ignore[misc]
+            c = self._s[sd.S_C:sd.S_C + 9]  # type: ignore[index]  # C_b^n row-major: roll, pitch from its last row
+            roll, pitch = math.atan2(c[7], c[8]), -math.asin(max(-1.0, min(1.0, c[6])))
+            lat = math.radians(self._pos[0])  # type: ignore[index]
+            yawgsf.predict(X, P, np.array(inc[0:3]), np.array(inc[3:6]), roll, pitch,
+                           -earth.OMEGA * math.sin(lat), inc[6])
+            self._gsf_inc = [0.0] * 7
 
     def _mag_from_sample(self, smp: ImuSample) -> None:
         """The magnetometer heading an IMU sample carries, at most one per ``aiding_every_s`` (docs/filter.md);
@@ -366,8 +409,41 @@ class Engine:
             self.set_position(lat, lon, h, source, sigma_h)
             return
         t_m = sd.state_time(self._s) if t is None else t
+        if self._gsf is not None and not self._gnss_yaw(lat, lon, vel, sigma_h, sigma_vel):
+            return
         self.filter.measure(self._s, self._kcfg, t_m, "gnss", math.radians(lat), math.radians(lon), h, vel,
                             sigma_h, sigma_v, sigma_vel)
+
+    def _gnss_yaw(self, lat: float, lon: float, vel: tuple[float, float, float] | None, sigma_h: float,
+                  sigma_vel: float) -> bool:
+        """While the heading is pending: a fix's horizontal velocity updates the yaw estimator; once its
+        yaw 1-sigma is below GSF_RESET_SIGMA_DEG the solution's heading, horizontal position and velocity
+        are reset to it and the fix (docs/filter.md "Heading from GNSS velocity"). Returns whether the
+        filter may take the fix: always after the reset; before, only below GSF_MOVING_MS (moving on an
+        unknown heading, the inertial velocity points anywhere)."""
+        if vel is None or not (math.isfinite(vel[0]) and math.isfinite(vel[1])):
+            return True
+        X, P, logw = self._gsf  # type: ignore[misc]
+        yawgsf.update(X, P, logw, float(vel[0]), float(vel[1]), float(sigma_vel))
+        psi, var = yawgsf.estimate(X, P, logw)
+        if var < math.radians(GSF_RESET_SIGMA_DEG) ** 2:
+            s = self._s
+            c = s[sd.S_C:sd.S_C + 9]  # type: ignore[index]
+            dpsi = math.remainder(psi - math.atan2(c[3], c[0]), 2.0 * math.pi)
+            kalman.yaw_reset(s, self._kcfg, self.filter.bias, self.filter.P, dpsi, var, math.radians(lat),
+                             math.radians(lon), sigma_h * sigma_h, float(vel[0]), float(vel[1]), sigma_vel * sigma_vel)
+            self._gsf = None
+            self.filter.free = kalman.ALL
+            self.heading_used = GNSS_YAW
+            self.counters["yaw_resets"] += 1
+            self._event("INFO", f"heading from GNSS velocity: {math.degrees(psi):.2f} deg (1-sigma "
+                                f"{math.degrees(math.sqrt(var)):.2f} deg), the solution turned by "
+                                f"{math.degrees(dpsi):.2f} deg and put on the fix")
+            return True
+        if math.hypot(vel[0], vel[1]) < GSF_MOVING_MS:
+            return True
+        self.counters["gnss_held_for_yaw"] += 1
+        return False
 
     def on_baro(self, t: float | None, h: float, sigma: float) -> None:
         """A barometric height (m, with an unknown offset the filter estimates)."""

@@ -229,10 +229,17 @@ def run_nav_aided(imu_path: Path, init_path: Path, out_path: Path, opts: NavOpti
                   spec: str | dict, lever_arm: tuple[float, float, float], gate: float) -> tuple[int, dict]:
     """``mavins nav --gnss/--baro/--mag/--rest``: the strapdown solution with the error-state filter
     (core/aided.py), written with the filter's 21 columns after the 14 solution columns.
-    Returns the rows written and the measurement counts (accepted, rejected) by kind."""
+    Returns the rows written and the measurement counts (accepted, rejected) by kind.
+
+    ``--timing`` prints the contract's line (``read_s`` the IMU and aiding files, ``compute_s`` the
+    aided run, ``write_s`` the solution) followed by ``strapdown_s``, the same samples through the
+    free-inertial kernel alone (run once more for the figure), and ``filter_s = compute_s -
+    strapdown_s``, the filter's own share."""
     import json
 
     from .core import aided
+
+    t_start = time.perf_counter()
 
     if opts.strapdown.frame != "geographic":
         raise ValueError(f"--frame {opts.strapdown.frame}: the filter (--gnss, --baro, --mag, --rest) works in the "
@@ -273,6 +280,7 @@ def run_nav_aided(imu_path: Path, init_path: Path, out_path: Path, opts: NavOpti
         row = int(np.argmax(mag[:, 4] <= 0.0))
         raise files.DataFileError(f"{aiding.mag}: line {row + 2}, column 'sigma': must be positive (deg of "
                                   f"heading), got {float(mag[row, 4])!r}")
+    t_read = time.perf_counter() - t_start
     try:
         rows, stats = aided.navigate_aided(
             imu, init_keys, gnss, baro, mag=mag, static=static, spec=spec, lever_arm=lever_arm, gate=gate,
@@ -280,9 +288,30 @@ def run_nav_aided(imu_path: Path, init_path: Path, out_path: Path, opts: NavOpti
             **{k: v for k, v in opts.strapdown.keywords().items() if k != "imu_rates"})
     except ValueError as exc:
         raise files.DataFileError(str(exc)) from None
+    t_compute = time.perf_counter() - t_start - t_read
     with files.atomic_output(out_path) as tmp:
         files.write_table(tmp, aided.OUT_COLUMNS, rows)
+    t_write = time.perf_counter() - t_start - t_read - t_compute
+    if opts.timing:
+        t_sd = _strapdown_seconds(imu, init_keys, opts)
+        print(f"timing: samples={imu.shape[0]} read_s={t_read:.3f} compute_s={t_compute:.3f} write_s={t_write:.3f} "
+              f"strapdown_s={t_sd:.3f} filter_s={max(t_compute - t_sd, 0.0):.3f}", file=sys.stderr)
     return rows.shape[0], stats["counts"]
+
+
+def _strapdown_seconds(imu: np.ndarray, init: dict, opts: NavOptions) -> float:
+    """Seconds the free-inertial kernel takes over the same increment rows (--timing's strapdown_s)."""
+    from .core import strapdown as sd
+    from .core.runner import initial_state
+
+    cfg = sd.make_config(**opts.strapdown.keywords())
+    state = initial_state(init)
+    t, dth, dv = (np.ascontiguousarray(imu[:, a:b]) for a, b in ((0, 1), (1, 4), (4, 7)))
+    out = np.empty((imu.shape[0] // opts.strapdown.samples + 1, sd.OUT_SIZE))
+    sd.run_increments(state.copy(), cfg, np.empty(0), np.empty((0, 3)), np.empty((0, 3)), out[:1])  # loaded
+    t0 = time.perf_counter()
+    sd.run_increments(state, cfg, t[:, 0], dth, dv, out)
+    return time.perf_counter() - t0
 
 
 def batch_outputs(imu_paths: list[Path], out_dir: Path) -> list[Path]:

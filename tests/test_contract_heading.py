@@ -288,7 +288,10 @@ def test_auto_heading_prefers_vehicle_then_mag_then_gyrocompass(tmp_path: Path) 
     lat, h = 50.0, 200.0
     gyro_only = Board(lat=lat, h=h, roll=3.0, pitch=2.0, yaw=120.0)
     with_mag = Board(lat=lat, h=h, roll=3.0, pitch=2.0, yaw=120.0, mag_heading=70.0)  # the magnetometer says 70
-    svc = Service(tmp_path, "--lat", str(lat), "--lon", "10", "--alt", str(h), "--align", "1", "--declination", "0")
+    # --grade navigation: gyros good enough to gyrocompass (with consumer ones, and GNSS aiding, auto waits
+    # for the heading from GNSS velocity instead: tests/test_heading_from_gnss.py)
+    svc = Service(tmp_path, "--lat", str(lat), "--lon", "10", "--alt", str(h), "--align", "1", "--declination", "0",
+                  "--grade", "navigation")
     mav = svc.mav()
     send_rest(mav, gyro_only, 300_000_000, 2.0)
     send_rest(mav, with_mag, 200_000_000, 2.0)

@@ -256,3 +256,22 @@ def test_gnss_delay_gives_late_stamps_the_accuracy_and_consistency_of_true_ones(
     assert abs(rms_comp - rms_true) <= 0.01 * rms_true and abs(z_comp - z_true) <= 0.01 * z_true, \
         (rms_true, rms_comp, z_true, z_comp)
     assert z_true < 1.5, z_true  # the true stamps are consistent (the Monte Carlo bands are in test_aided_filter.py)
+
+
+def test_timing_line_on_the_filters_path(flight: Path, tmp_path: Path) -> None:
+    """--timing with the filter prints the contract's line (samples, read_s, compute_s, write_s: the
+    strapdown's form) plus strapdown_s (the same samples free inertial) and filter_s = compute_s -
+    strapdown_s, each figure printed to the millisecond (so the difference agrees to 1 ms)."""
+    import re
+
+    out = tmp_path / "t.csv"
+    code, err = run("nav", flight / "imu.csv", "--init", flight / "init.json", "-o", out, "--gnss", flight / "gnss.csv",
+                    "--timing")
+    assert code == 0, err
+    m = re.search(r"^timing: samples=(\d+) read_s=(\S+) compute_s=(\S+) write_s=(\S+) strapdown_s=(\S+) "
+                  r"filter_s=(\S+)$", err, re.M)
+    assert m, err
+    n = len(_table(flight / "imu.csv")[1])
+    read, compute, write, sd_s, filt = (float(x) for x in m.groups()[1:])
+    assert int(m.group(1)) == n and min(read, compute, write, sd_s, filt) >= 0.0
+    assert abs(filt - max(compute - sd_s, 0.0)) <= 0.0015

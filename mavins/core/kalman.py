@@ -62,6 +62,8 @@ from .jit import kernel
 from .rotation import mat3_mul_s, mat_vec, quat_mul_s, quat_to_dcm_s, rotvec_to_dcm_s, rotvec_to_quat_s, skew, wrap_pi
 
 ALL = np.ones(NX)  # update(): every state may be corrected
+ALL_BUT_HEADING = ALL.copy()  # update(): the heading is a consider state (unknown, not learnt: engine.GNSS_YAW_PENDING)
+ALL_BUT_HEADING[X_PHI + 2] = 0.0
 
 B_BG = 0
 B_BA = 3
@@ -247,6 +249,34 @@ def apply_update(
 
 
 # --- measurement models: (nu, H, R) -----------------------------------------
+
+
+@kernel
+def yaw_reset(s: np.ndarray, cfg: np.ndarray, bias: np.ndarray, P: np.ndarray, dpsi: float, var_yaw: float,
+              lat: float, lon: float, var_pos: float, v_n: float, v_e: float, var_vel: float) -> None:
+    """Turn the solution's heading by dpsi (rad, about down) and put its horizontal position and velocity on
+    a GNSS fix (lat, lon rad; v_N, v_E m/s), through :func:`feedback` with ``phi_D = -dpsi`` (so
+    ``C <- Rz(dpsi) C``, exact for any angle), ``dp = p - p_fix``, ``dv = v - v_fix``; then the rows and
+    columns of phi_D, the horizontal position and velocity in P are reset to these variances (rad^2, m^2,
+    m^2/s^2) and no correlation (a reset, as PX4 EKF2 resets its yaw from the GNSS-velocity yaw
+    estimator). The vertical, the level and the biases are kept."""
+    x = np.zeros(P.shape[0])
+    x[X_PHI + 2] = -dpsi
+    lat0, lon0, _ = sd.position(s, cfg, GEOGRAPHIC)
+    mn, me = metres_per_radian(s, cfg)
+    x[X_DP] = (lat0 - lat) * mn
+    x[X_DP + 1] = (lon0 - lon) * me
+    x[X_DV] = s[sd.S_V] - v_n
+    x[X_DV + 1] = s[sd.S_V + 1] - v_e
+    feedback(s, cfg, bias, x)
+    idx = (X_PHI + 2, X_DP, X_DP + 1, X_DV, X_DV + 1)
+    var = (var_yaw, var_pos, var_pos, var_vel, var_vel)
+    for k in range(5):
+        j = idx[k]
+        for i in range(P.shape[0]):
+            P[j, i] = 0.0
+            P[i, j] = 0.0
+        P[j, j] = var[k]
 
 
 @kernel
