@@ -28,6 +28,8 @@ AIDING_KINDS = ("gnss", "baro", "mag", "zupt")
 ABS_TIMEOUT_S = 5.0  # s of sensor time after the last accepted fix during which position counts as absolute
 GNSS_LOST_S = 3.0  # s without an accepted fix after which GNSS is reported lost
 JUMP_M = 1.0  # m: an accepted position correction above this is a discontinuity (reset_counter)
+MAG_INCL_GATE_DEG = 20.0  # deg: a sample whose inclination differs more from the model's is disturbed (EKF2_MAG_CHK_INC)
+MAG_STRENGTH_GATE = 0.2  # gauss: likewise for its strength (PX4 EKF2_MAG_CHK_STR)
 
 
 @dataclass
@@ -39,6 +41,7 @@ class FilterSettings:
     gate: float = 5.0
     lever_arm: tuple[float, float, float] = (0.0, 0.0, 0.0)
     declination: float = 0.0  # deg, east positive (the engine sets its --declination here)
+    mag_model: tuple[float, float] | None = None  # the model's inclination (deg) and strength (gauss): disturbance gate
     sigma_pos: float = 10.0  # m: initial position 1-sigma without a fix
     sigma_vel: float = 0.1  # m/s: initial velocity 1-sigma (aligned at rest)
     sigma_level: float = 1.0  # deg
@@ -240,12 +243,29 @@ class LiveFilter:
         elif kind == "mag":
             (m_b,) = args
             m_n = kalman.mag_level(s, cfg, np.asarray(m_b, dtype=float), np.array(self._w_ib), late)
+            if self._disturbed(m_n):
+                return
             if self._update(s, cfg, "mag", ("mag",), kalman.mag_heading(
                     m_n, math.radians(self.settings.declination), kalman.mag_inclination(self._incl, m_n),
                     math.radians(self.settings.sigma_mag))):
                 kalman.mag_accept(self._incl, m_n)
         elif kind == "zupt":
             self._update(s, cfg, "zupt", ("vel",), kalman.zupt(s, self.settings.sigma_zupt))
+
+    def _disturbed(self, m_n: np.ndarray) -> bool:
+        """Whether a levelled magnetometer sample (NED, gauss) disagrees with the Earth's field the model
+        gives (settings.mag_model): inclination ``atan2(m_D, |m_h|)`` off by more than MAG_INCL_GATE_DEG
+        or strength by more than MAG_STRENGTH_GATE (PX4 EKF2's magnetometer checks). Counted
+        ``mag_disturbed`` (a motor, steel, a power cable), never applied."""
+        model = self.settings.mag_model
+        if model is None:
+            return False
+        incl = math.degrees(math.atan2(m_n[2], math.hypot(m_n[0], m_n[1])))
+        strength = math.sqrt(m_n[0] ** 2 + m_n[1] ** 2 + m_n[2] ** 2)
+        if abs(incl - model[0]) <= MAG_INCL_GATE_DEG and abs(strength - model[1]) <= MAG_STRENGTH_GATE:
+            return False
+        self.counters["mag_disturbed"] += 1
+        return True
 
     def _update(self, s: np.ndarray, cfg: np.ndarray, kind: str, ratio_keys: tuple[str, ...],
                 model: tuple[np.ndarray, np.ndarray, np.ndarray]) -> bool:

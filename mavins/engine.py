@@ -152,8 +152,6 @@ class Engine:
     def _magnetic_declination(self, uses_mag: bool) -> float:
         """The declination (deg) for this alignment: ``--declination``, else the World Magnetic
         Model's at the initial position and the date (docs/conventions.md "Magnetic field")."""
-        if self.cfg.declination is not None:
-            return float(self.cfg.declination)
         if self.cfg.mag_year is not None:
             year, when = float(self.cfg.mag_year), "the given date"
         elif self._unix_date is not None:
@@ -162,6 +160,11 @@ class Engine:
             year, when = magmodel.this_year(), "today's date (the stream gave none)"
         lat, lon, alt = self._pos  # type: ignore[misc]
         f = magmodel.field_at(lat, lon, alt, year)
+        # the field for the disturbance checks (gauss: 1 G = 1e5 nT), whatever gives the declination
+        self.filter.settings = dataclasses.replace(self.filter.settings,
+                                                   mag_model=(f.inclination, f.intensity * 1e-5))
+        if self.cfg.declination is not None:
+            return float(self.cfg.declination)
         if uses_mag:
             self._event("INFO", f"magnetic declination {f.declination:.2f} deg (inclination {f.inclination:.1f} deg, "
                                 f"{f.intensity / 1000.0:.1f} uT) from {f.model} at the initial position for {year:.2f}, "

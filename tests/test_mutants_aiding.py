@@ -766,6 +766,27 @@ def test_late_magnetometer_sample_is_turned_with_the_bias_corrected_rate(late) -
     assert yaw(s) == pytest.approx(want, abs=1e-9)
 
 
+@pytest.mark.parametrize("incl_deg, strength, disturbed", [
+    (63.0, 0.48, False), (63.0 + 19.9, 0.48, False), (63.0 - 20.1, 0.48, True), (63.0 + 20.1, 0.48, True),
+    (63.0, 0.48 + 0.19, False), (63.0, 0.48 - 0.21, True), (63.0, 0.48 + 0.21, True),
+])
+def test_magnetometer_samples_far_from_the_model_are_disturbances(incl_deg, strength, disturbed) -> None:
+    """The model's field I = 63 deg, 0.48 gauss: a level sample (yaw 0, so m_n = m_b) of inclination and
+    strength within 20 deg and 0.2 gauss (PX4 EKF2's default checks) is used; beyond either, it is counted
+    mag_disturbed and not applied (no mag counter, heading untouched). Without a model nothing is gated."""
+    i = math.radians(incl_deg)
+    m_b = (strength * math.cos(i), 0.0, strength * math.sin(i))
+    s = state()
+    f = live(s, p={em.X_PHI + 2: 0.01}, mag_model=(63.0, 0.48))
+    f.measure(s, CFG, T0, "mag", m_b)
+    assert (f.counters["mag_disturbed"] == 1) is disturbed
+    assert f.counters["mag_accepted"] + f.counters["mag_rejected"] == (0 if disturbed else 1)
+    s = state()
+    f = live(s, p={em.X_PHI + 2: 0.01})
+    f.measure(s, CFG, T0, "mag", m_b)
+    assert f.counters["mag_disturbed"] == 0 and f.counters["mag_accepted"] + f.counters["mag_rejected"] == 1
+
+
 def test_zupt_by_hand() -> None:
     """v = (0.02, -0.04, 0.01) m/s, P_v = sigma_zupt^2 = 0.05^2: a ZUPT halves the velocity; ratio
     (0.04 / sqrt(0.005) / 5)^2 = 0.0128; a 10 m/s velocity is rejected by the gate."""

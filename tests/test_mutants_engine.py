@@ -922,3 +922,39 @@ def test_published_row_is_the_configured_frames(frame: str) -> None:
     np.testing.assert_allclose(r[7:10], ATT, rtol=0, atol=1e-7)
     np.testing.assert_allclose(r[1:3], [math.radians(LAT), math.radians(LON)], rtol=0, atol=1e-9)
     np.testing.assert_allclose(r[4:7], 0.0, atol=1e-6)
+
+
+# --- the Earth's field from the model (docs/conventions.md "Magnetic field") ---------------------------
+# NOAA's WMM2025 test values at 80 S, 240 E (= -120), 0 km (WMM2025testvalues.pdf): X, Y, Z (nT), D (deg)
+NOAA_2025 = ((6117.5, 15751.9, -52022.5), 68.78)
+NOAA_2027_5 = ((6200.7, 15730.3, -51783.7), 68.49)
+
+
+@pytest.mark.parametrize("year, date_s, noaa", [(2025.0, None, NOAA_2025), (None, 1_814_529_600.0, NOAA_2027_5)])
+def test_alignment_takes_the_models_declination_and_field(year, date_s, noaa):
+    """No declination given: at alignment the engine takes the World Magnetic Model's declination at the
+    initial position, for mag_year or else the date the vehicle gave (set_date: 2027-07-02T12:00Z =
+    2027.5), and gives the filter the field's inclination atan2(Z, hypot(X, Y)) and strength (gauss:
+    nT * 1e-5) for its disturbance checks: NOAA's published values within their rounding (0.005 deg,
+    0.05 nT per component)."""
+    (x, y, z), d = noaa
+    e = Engine(cfg(lat=-80.0, lon=-120.0, alt=0.0, heading=0.0, mag_year=year, filter=FilterSettings(aiding=("mag",))))
+    if date_s is not None:
+        e.set_date(123.0)  # a boot clock is no date
+        e.set_date(date_s)
+    align(e, lat=-80.0, h=0.0)
+    assert abs(e.declination - d) <= 0.005
+    assert abs(e.filter.settings.declination - d) <= 0.005
+    incl, strength = e.filter.settings.mag_model
+    assert abs(incl - math.degrees(math.atan2(z, math.hypot(x, y)))) <= 1e-3
+    assert abs(strength - math.sqrt(x * x + y * y + z * z) * 1e-5) <= 1e-6
+    assert any("magnetic declination" in t and "WMM-2025" in t for t in texts(e))
+
+
+def test_a_given_declination_wins_and_the_field_is_still_checked():
+    """--declination 4.5: used as given (no line about the model), the model's field still gates."""
+    e = Engine(cfg(heading=0.0, declination=4.5, mag_year=2025.0, filter=FilterSettings(aiding=("mag",))))
+    align(e)
+    assert e.declination == 4.5 and e.filter.settings.declination == 4.5
+    assert e.filter.settings.mag_model is not None
+    assert not any("magnetic declination" in t for t in texts(e))
