@@ -60,6 +60,41 @@ def test_each_date_takes_the_release_that_covers_it() -> None:
     assert early.model == "WMM-2010" and early.extrapolated
 
 
+def test_the_years_each_side_of_the_shipped_releases() -> None:
+    """2010.0 is the first release's first day (not extrapolated), 2030.0 the day after the last one's
+    five years (extrapolated); the pole itself has a field (D undefined there, I and F not)."""
+    assert not magmodel.field_at(47.4, 8.5, 500.0, 2010.0).extrapolated
+    assert magmodel.field_at(47.4, 8.5, 500.0, 2030.0).extrapolated
+    assert not magmodel.field_at(47.4, 8.5, 500.0, 2029.999).extrapolated
+    pole = magmodel.field_at(90.0, 0.0, 0.0, 2025.0)
+    assert 80.0 < pole.inclination < 90.0 and 50000.0 < pole.intensity < 60000.0
+
+
+@pytest.mark.parametrize("zone", ["Etc/GMT-14", "Etc/GMT+12"])
+def test_today_is_the_utc_date_whatever_the_local_zone(zone: str) -> None:
+    """this_year() counts from today's 00:00 UTC, not the machine's local midnight nor local date: in a zone
+    14 h ahead or 12 h behind UTC it is the same number as computed here from the UTC date."""
+    import datetime as dt
+    import os
+    import time
+
+    old = os.environ.get("TZ")
+    os.environ["TZ"] = zone
+    time.tzset()
+    try:
+        y = magmodel.this_year()
+        today = dt.datetime.now(dt.timezone.utc).date()
+    finally:
+        if old is None:
+            os.environ.pop("TZ", None)
+        else:
+            os.environ["TZ"] = old
+        time.tzset()
+    start = dt.date(today.year, 1, 1)
+    days = (dt.date(today.year + 1, 1, 1) - start).days
+    assert abs(y - (today.year + (today - start).days / days)) < 1e-12
+
+
 def test_declination_moves_with_the_secular_variation_between_test_dates() -> None:
     """Between the two published dates the model changes by what the published values change by
     (at 80 N, 0 E: D from 1.28 to 2.59 deg in 2.5 years), each within the printed rounding."""

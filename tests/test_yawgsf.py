@@ -24,13 +24,44 @@ def one(psi: float, p: np.ndarray | None = None, v=(0.0, 0.0)) -> tuple[np.ndarr
 
 
 def test_a_bank_starts_evenly_around_the_circle_with_equal_weights() -> None:
-    """N = 5: yaws -144, -72, 0, 72, 144 deg, yaw 1-sigma half the 72 deg spacing, weights 1/5."""
+    """N = 5: yaws -144, -72, 0, 72, 144 deg, yaw 1-sigma half the 72 deg spacing, velocity 1-sigma
+    SIGMA_VEL0, no correlation, weights 1/5."""
     X, P, logw = yawgsf.make(1.5, -2.0)
+    assert X.shape == (5, 3) and P.shape == (5, 3, 3) and logw.shape == (5,)
     np.testing.assert_allclose(np.degrees(X[:, 2]), [-144.0, -72.0, 0.0, 72.0, 144.0], atol=1e-12)
     np.testing.assert_allclose(X[:, :2], [[1.5, -2.0]] * 5)
-    np.testing.assert_allclose(np.sqrt(P[:, 2, 2]), math.radians(36.0), rtol=1e-12)
-    np.testing.assert_allclose(P[:, 0, 0], yawgsf.SIGMA_VEL0 ** 2)
+    v0 = yawgsf.SIGMA_VEL0 ** 2
+    for Pi in P:
+        np.testing.assert_allclose(Pi, np.diag([v0, v0, math.radians(36.0) ** 2]), rtol=1e-12, atol=0)
     np.testing.assert_allclose(np.exp(logw), 0.2, rtol=1e-12)
+
+
+def rx(a: float) -> np.ndarray:
+    return np.array([[1.0, 0.0, 0.0], [0.0, math.cos(a), -math.sin(a)], [0.0, math.sin(a), math.cos(a)]])
+
+
+def ry(a: float) -> np.ndarray:
+    return np.array([[math.cos(a), 0.0, math.sin(a)], [0.0, 1.0, 0.0], [-math.sin(a), 0.0, math.cos(a)]])
+
+
+def test_predict_with_roll_pitch_and_a_correlated_covariance() -> None:
+    """Roll 0.3, pitch -0.2 rad (C_b^n with yaw 0 = Ry(pitch) Rx(roll), the contract's rotation), body
+    increments dv = (1, 0.5, -2) m/s, dtheta = (0.1, -0.2, 0.3) rad, a model at 0.7 rad moving (2, -1) m/s
+    with a full covariance: velocity += Rz(psi + dpsi/2) u[:2], yaw += dpsi, P <- F P F^T + Q, all
+    computed here with numpy from the rotation matrices."""
+    roll, pitch, T, w_in_d = 0.3, -0.2, 0.05, -4e-5
+    dv, dth = np.array([1.0, 0.5, -2.0]), np.array([0.1, -0.2, 0.3])
+    p = np.array([[0.5, 0.1, 0.05], [0.1, 0.4, -0.02], [0.05, -0.02, 0.3]])
+    X, P, _ = one(0.7, p, v=(2.0, -1.0))
+    yawgsf.predict(X, P, dv, dth, roll, pitch, w_in_d, T)
+    u = ry(pitch) @ rx(roll) @ dv
+    dpsi = (ry(pitch) @ rx(roll) @ dth)[2] - w_in_d * T
+    m = 0.7 + dpsi / 2
+    dn, de = math.cos(m) * u[0] - math.sin(m) * u[1], math.sin(m) * u[0] + math.cos(m) * u[1]
+    np.testing.assert_allclose(X[0], [2.0 + dn, -1.0 + de, 0.7 + dpsi], atol=1e-12)
+    F = np.array([[1.0, 0.0, -de], [0.0, 1.0, dn], [0.0, 0.0, 1.0]])
+    q = np.diag([yawgsf.SIGMA_ACC ** 2 * T] * 2 + [yawgsf.SIGMA_YAW_RATE ** 2 * T + (yawgsf.SCALE_YAW * dpsi) ** 2])
+    np.testing.assert_allclose(P[0], F @ p @ F.T + q, atol=1e-12)
 
 
 @pytest.mark.parametrize("psi_deg", [0.0, 30.0, -120.0])
@@ -64,17 +95,35 @@ def test_predict_levels_with_roll_and_pitch() -> None:
 
 
 def test_update_is_the_two_dimensional_kalman_update() -> None:
-    """P = [[4, 1, 2], [1, 9, -3], [2, -3, 5]], sigma = 1: S = P_vv + I, K = P[:, :2] S^-1, x - K nu,
-    P - K S K^T (numbers from numpy's own algebra on the typed matrices)."""
+    """P = [[4, 1, 2], [1, 9, -3], [2, -3, 5]], sigma = 0.5: S = P_vv + 0.25 I, K = P[:, :2] S^-1, x - K nu
+    (nu = (0.5, -2)), P - K S K^T (numbers from numpy's own algebra on the typed matrices)."""
     p = np.array([[4.0, 1.0, 2.0], [1.0, 9.0, -3.0], [2.0, -3.0, 5.0]])
     X, P, logw = one(0.4, p, v=(1.0, 2.0))
-    yawgsf.update(X, P, logw, 0.5, 3.0, 1.0)
-    S = p[:2, :2] + np.eye(2)
+    yawgsf.update(X, P, logw, 0.5, 4.0, 0.5)
+    S = p[:2, :2] + 0.25 * np.eye(2)
     K = p[:, :2] @ np.linalg.inv(S)
-    nu = np.array([0.5, -1.0])
+    nu = np.array([0.5, -2.0])
     np.testing.assert_allclose(X[0], np.array([1.0, 2.0, 0.4]) - K @ nu, atol=1e-12)
     np.testing.assert_allclose(P[0], p - K @ S @ K.T, atol=1e-12)
     assert logw[0] == 0.0  # one model: normalised to weight 1
+
+
+def test_weights_take_the_full_mahalanobis_distance_and_the_prior() -> None:
+    """Two models, prior weights 0.8 / 0.2, correlated velocity covariances, sigma 0.5: each new weight is
+    prior x N(nu; 0, S) normalised, N the bivariate normal density written out here."""
+    X = np.array([[1.0, -0.5, 0.0], [-0.7, 1.2, 1.0]])
+    P = np.array([[[2.0, 0.6, 0.1], [0.6, 1.0, 0.0], [0.1, 0.0, 0.5]],
+                  [[1.5, -0.4, 0.0], [-0.4, 3.0, 0.2], [0.0, 0.2, 0.5]]])
+    prior = np.array([0.8, 0.2])
+    logw = np.log(prior)
+    dens = []
+    for i in range(2):
+        S = P[i, :2, :2] + 0.25 * np.eye(2)
+        nu = X[i, :2] - np.array([0.3, 0.4])
+        dens.append(math.exp(-0.5 * nu @ np.linalg.solve(S, nu)) / (2 * math.pi * math.sqrt(np.linalg.det(S))))
+    yawgsf.update(X, P, logw, 0.3, 0.4, 0.5)
+    want = prior * np.array(dens)
+    np.testing.assert_allclose(np.exp(logw), want / want.sum(), rtol=1e-12)
 
 
 def test_weights_follow_the_likelihood_of_each_innovation() -> None:
