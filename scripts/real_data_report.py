@@ -22,6 +22,11 @@ value keeps its sign) and writes a PNG plot. Run from
 the repository root::
 
     .venv/bin/python scripts/real_data_report.py [LOG.ulg] [--png docs/images/real-data-aided.png]
+    .venv/bin/python scripts/real_data_report.py --defaults [--code CHECKOUT]
+
+``--defaults`` instead replays every PX4 log in data/ with no options at all, as
+a new user would, and prints one table row per log against PX4's estimate
+(``--code`` runs another checkout's package, for a before/after comparison).
 
 Bad input (no such log, not a ULog, no attitude or GPS topic): one line on
 stderr, exit 2, and no plot is written.
@@ -135,10 +140,13 @@ def replay_command(log: Path, out: Path, aiding: str, decl: float, start: tuple[
     return cmd
 
 
-def run_replay(cmd: list[str]) -> np.ndarray:
-    """Run one replay (``mavins`` = this interpreter's module); its solution rows."""
+def run_replay(cmd: list[str], code: Path = ROOT) -> np.ndarray:
+    """Run one replay (``mavins`` = this interpreter's module, from the checkout ``code``); its solution rows."""
+    import os
+
+    env = {**os.environ, "PYTHONPATH": str(code)}
     proc = subprocess.run([sys.executable, "-m", "mavins.cli", *cmd[1:]], check=False, capture_output=True, text=True,
-                          cwd=ROOT)
+                          cwd=code, env=env)
     if proc.returncode != 0:
         raise DataFileError(proc.stderr.strip().splitlines()[-1] if proc.stderr.strip() else "mavins replay failed")
     return np.loadtxt(cmd[cmd.index("-o") + 1], delimiter=",", skiprows=1, ndmin=2)
@@ -252,11 +260,52 @@ def plot(runs: list[tuple[str, Comparison]], png: Path) -> None:
     plt.close(fig)
 
 
+DATA_LOGS = ("px4-sitl-events/sample_px4_events.ulg", "px4-gps-small/sample_log_small.ulg", "px4-sample/sample.ulg")
+
+
+def defaults_table(code: Path) -> str:
+    """Every PX4 log in data/ replayed the way a new user runs it, ``mavins replay LOG -o NAV.csv`` with no
+    option, by the package in ``code``: a Markdown table against PX4's own estimate (RMS / max)."""
+    lines = ["| log | rows | heading (deg) | level (deg) | horizontal (m) | height change (m) |", "|---|---|---|---|---|---|"]
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in DATA_LOGS:
+            log = ROOT / "data" / name
+            out = Path(tmp) / "nav.csv"
+            try:
+                ref = read_reference(log)
+            except DataFileError:
+                ref = None
+            try:
+                sol = run_replay(["mavins", "replay", str(log), "-o", str(out)], code)
+            except DataFileError as exc:
+                why = str(exc).replace(str(log), name).replace("mavins replay: error: ", "")
+                lines.append(f"| {name} | no solution: {why} | | | | |")
+                continue
+            if ref is None:
+                lines.append(f"| {name} | {len(sol)} | (no PX4 estimate with GPS in the log) | | | |")
+                continue
+            c = compare(sol, ref)
+            cells = ["{:.2f} / {:.2f}".format(*stats(x)[:2]) for x in (c.yaw, c.level, c.horiz, c.vert)]
+            lines.append(f"| {name} | {len(sol)} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("log", type=Path, nargs="?", default=LOG, help="PX4 .ulg with GPS (default: %(default)s)")
     ap.add_argument("--png", type=Path, default=PNG, help="plot to write (default: %(default)s)")
+    ap.add_argument("--defaults", action="store_true",
+                    help="instead: every PX4 log in data/ replayed with no options against PX4's estimate")
+    ap.add_argument("--code", type=Path, default=ROOT,
+                    help="with --defaults: the checkout whose mavins replays (e.g. a worktree of an earlier "
+                         "commit, for a before/after table; default: this one)")
     args = ap.parse_args(argv)
+    if args.defaults:
+        if not (args.code / "mavins" / "cli.py").is_file():
+            print(f"real_data_report: error: {args.code}: no mavins checkout there", file=sys.stderr)
+            return EXIT_USAGE
+        print(defaults_table(args.code.resolve()))
+        return 0
     try:
         if not args.log.is_file():
             raise DataFileError(f"{args.log}: no such file")
