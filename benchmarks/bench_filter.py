@@ -451,7 +451,7 @@ def live_frames(seconds: float) -> tuple[list[bytes], np.ndarray, dict, Any]:
 
 
 def _pipeline(init: dict, aiding: tuple[str, ...]) -> Any:
-    from mavins.aiding import FilterSettings
+    from mavins.livefilter import FilterSettings
     from mavins.engine import EngineConfig
     from mavins.pipeline import Pipeline
 
@@ -593,10 +593,10 @@ PROFILE_PARTS = (
     ("Pipeline.handle", "mavins/pipeline.py", "handle"),
     ("  Ingest.sample (validation)", "mavins/link/ingest.py", "sample"),
     ("  Engine.on_imu", "mavins/engine.py", "on_imu"),
-    ("    LiveFilter.push", "mavins/aiding.py", "push"),
+    ("    LiveFilter.push", "mavins/livefilter.py", "push"),
     ("      aided.push_rate_aided (compiled strapdown + filter)", "~", "push_rate_aided"),
-    ("    LiveFilter._apply (GNSS updates)", "mavins/aiding.py", "_apply"),
-    ("    LiveFilter.uncertainty (per output)", "mavins/aiding.py", "uncertainty"),
+    ("    LiveFilter._apply (GNSS updates)", "mavins/livefilter.py", "_apply"),
+    ("    LiveFilter.uncertainty (per output)", "mavins/livefilter.py", "uncertainty"),
 )
 
 

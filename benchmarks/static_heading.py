@@ -32,7 +32,7 @@ def draw(seed: int, seconds: float, grade: str) -> list[tuple[float, float, floa
     from sim.scenarios import load
     from sim.stream import StreamOptions, frames
 
-    from mavins.aiding import FilterSettings
+    from mavins.livefilter import FilterSettings
     from mavins.engine import EngineConfig
     from mavins.link.ingest import IngestConfig
     from mavins.link.mavlink import mavlink

@@ -8,7 +8,7 @@
    run), through mavins/parallel.py (local cores or a Dask cluster); the
    sample standard deviation of the error against truth at every output time.
 3. Files (docs/conventions.md "Error analysis"): covariance.csv, montecarlo.csv,
-   budget.csv, plus analysis.rrd (Rerun, record/analysis.py) and analysis.png
+   budget.csv, plus analysis.rrd (Rerun, record/budget.py) and analysis.png
    (when matplotlib is installed); written
    together, temp-and-rename, only when everything succeeded.
 """
@@ -293,7 +293,7 @@ def run_analyze(scenario: object, spec: cov.AnalysisSpec, outdir: Path, opts: An
             fh.write(",".join(BUDGET_HEADER) + "\n")
             fh.writelines(f"{name},{','.join(repr(float(v)) for v in result.budget[name])}\n"
                           for name in cov.SOURCES + ("total",))
-        from .record.analysis import write_analysis
+        from .record.budget import write_analysis
 
         write_analysis(Path(str(tmps[3])), result.t, result.covariance, result.montecarlo)
         if len(tmps) > 4:

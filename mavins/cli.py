@@ -414,9 +414,9 @@ def _cmd_nav_each(args: argparse.Namespace, opts: object) -> int:
 
 
 def _cmd_nav_fdi(args: argparse.Namespace, opts: object) -> int:
-    """``mavins nav IMU0.csv IMU1.csv ... [--fdi-log FDI.csv]``: parse, call mavins.fdi, report."""
+    """``mavins nav IMU0.csv IMU1.csv ... [--fdi-log FDI.csv]``: parse, call mavins.navfdi, report."""
     from . import files
-    from .fdi import run_nav_fdi, strapdown_keywords
+    from .navfdi import run_nav_fdi, strapdown_keywords
 
     try:
         if any(v is not None for v in (args.gnss, args.baro, args.mag, args.rest)):
@@ -672,7 +672,7 @@ def _engine_config(args: argparse.Namespace):  # type: ignore[no-untyped-def]
         heading = float(args.heading)
     except (TypeError, ValueError):
         pass
-    from .aiding import FilterSettings
+    from .livefilter import FilterSettings
 
     flt = FilterSettings(spec=_imu_spec(args), aiding=args.aiding, gate=args.gate, lever_arm=args.lever_arm,
                          delays=_delays(args))

@@ -24,7 +24,7 @@ from typing import Callable
 
 import numpy as np
 
-from .aiding import FilterSettings
+from .livefilter import FilterSettings
 from .core import jit
 from .core.frames import north_east_error
 from .core.rotation import euler_to_quat, quat_angle_rows

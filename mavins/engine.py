@@ -22,7 +22,7 @@ from .core import strapdown as sd
 from .core.jit import for_frame
 from .core.records import ImuSample, Solution
 from .core.settings import Strapdown, strapdown_of
-from .aiding import FilterSettings, LiveFilter
+from .livefilter import FilterSettings, LiveFilter
 from .core.rotation import euler_to_dcm
 
 

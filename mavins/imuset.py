@@ -15,6 +15,7 @@ from collections import Counter
 
 import numpy as np
 
+from .core import errmodel
 from .core.fdi import FdiEvent, ImuSetMonitor
 from .core.records import ImuSample
 from .core.redundancy import ST_ALARM
@@ -188,9 +189,7 @@ class ImuSet:
         dt = t - self.prev_t
         self.prev_t = t
         if self.monitor is None:
-            from .fdi import imu_spec
-
-            self.monitor = ImuSetMonitor(len(self.order), imu_spec(self.spec), dt,  # type: ignore[arg-type]
+            self.monitor = ImuSetMonitor(len(self.order), errmodel.spec_of(self.spec), dt,  # type: ignore[arg-type]
                                          false_alarm=self.false_alarm, keep_log=False)
         rows = [self.held[k] for k in self.order]
         w = np.array([[r.gyro for r in rows]])

@@ -103,7 +103,7 @@ def warm_up(engine_cfg: EngineConfig, pub: publish.PublishConfig) -> float:
         # two cores at once: a second process compiles the filter's measurement and propagation
         # kernels into the shared cache while this one compiles the strapdown kernel; the filter's
         # top-level kernels then load them (29.4 -> 20.4 s on a 2-core machine, benchmarks/bench_startup.py)
-        code = "from mavins.aiding import warm_measurements; warm_measurements()"
+        code = "from mavins.livefilter import warm_measurements; warm_measurements()"
         helper = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         kcfg = sd.make_config(**strapdown_of(engine_cfg).keywords())
         jit.for_frame(sd.push_rate_scalars, sd.kernel_frame(kcfg))(rest_state(), kcfg, 0.01, 0.0, 0.0, 0.0, 0.0, 0.0, -9.8)

@@ -409,9 +409,9 @@ def test_heading_words_are_the_engines() -> None:
 
 
 def test_aiding_words_are_the_filters() -> None:
-    from mavins import aiding
+    from mavins import livefilter
 
-    assert cli.AIDING_WORDS == aiding.AIDING_KINDS
+    assert cli.AIDING_WORDS == livefilter.AIDING_KINDS
 
 
 def test_issue6_run_rate_0_and_other_non_positive_service_values(world: Path) -> None:

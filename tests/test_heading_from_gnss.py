@@ -15,7 +15,7 @@ import math
 import numpy as np
 import pytest
 
-from mavins.aiding import FilterSettings
+from mavins.livefilter import FilterSettings
 from mavins.core.records import ImuSample
 from mavins.engine import GNSS_YAW, GNSS_YAW_PENDING, Engine, EngineConfig
 from sim.aiding import GnssConfig, simulate_aiding

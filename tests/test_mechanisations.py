@@ -266,7 +266,7 @@ def test_frames_run_without_jit(tmp_path):
 def test_service_marks_geographic_degraded_near_the_pole(frame, degraded):
     """The engine (mavins run/replay) at rest at 89.9 deg N: the geographic frame's solutions say
     degraded, with one warning; the wander frame's do not."""
-    from mavins.aiding import FilterSettings
+    from mavins.livefilter import FilterSettings
     from mavins.core.records import ImuSample
     from mavins.engine import Engine, EngineConfig
 
@@ -287,7 +287,7 @@ def test_service_marks_geographic_degraded_near_the_pole(frame, degraded):
 
 
 def test_aided_frames_refused():
-    from mavins.aiding import FilterSettings
+    from mavins.livefilter import FilterSettings
     from mavins.engine import Engine, EngineConfig
 
     with pytest.raises(ValueError, match="aiding none"):

@@ -1,4 +1,4 @@
-"""Mutation-testing kills for mavins/aiding.py, the live filter's stateful shell (docs/testing.md).
+"""Mutation-testing kills for mavins/livefilter.py, the live filter's stateful shell (docs/testing.md).
 
 LiveFilter in-process on a level vehicle in laboratory mode (earth = none: no Earth rate,
 constant gravity, the position a flat NED offset from the start in metres, strapdown.position),
@@ -19,8 +19,8 @@ import math
 import numpy as np
 import pytest
 
-from mavins import aiding
-from mavins.aiding import AIDING_KINDS, FilterSettings, LiveFilter
+from mavins import livefilter
+from mavins.livefilter import AIDING_KINDS, FilterSettings, LiveFilter
 from mavins.core import errmodel as em
 from mavins.core import kalman as kf
 from mavins.core import strapdown as sd
@@ -853,9 +853,9 @@ def test_warm_measurements_runs_every_kind_once() -> None:
             made.append(self)
 
     mp = pytest.MonkeyPatch()
-    mp.setattr(aiding, "LiveFilter", Recording)
+    mp.setattr(livefilter, "LiveFilter", Recording)
     try:
-        assert aiding.warm_measurements() is None
+        assert livefilter.warm_measurements() is None
     finally:
         mp.undo()
     (f,) = made

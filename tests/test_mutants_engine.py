@@ -22,7 +22,7 @@ import math
 import numpy as np
 import pytest
 
-from mavins.aiding import FilterSettings
+from mavins.livefilter import FilterSettings
 from mavins.core.records import ImuSample
 from mavins.engine import Engine, EngineConfig, State
 from support import cbn as c_bn
@@ -893,7 +893,7 @@ def test_zero_velocity_updates_exactly(case):
 def test_body_rate_is_the_raw_rate_minus_both_gyro_bias_parts_to_the_bit() -> None:
     """LiveFilter.body_rate (floats, per attitude update) equals numpy's w - (constant + Gauss-Markov
     bias) bit for bit, and uses neither the accelerometer parts nor another axis."""
-    from mavins.aiding import LiveFilter
+    from mavins.livefilter import LiveFilter
     from mavins.core import kalman
 
     flt = LiveFilter(FilterSettings(spec="consumer"))

@@ -1,4 +1,4 @@
-"""Mutation-testing kills for mavins/imuset.py (live ``--imus``) and mavins/fdi.py (``mavins nav IMU0 IMU1 ...
+"""Mutation-testing kills for mavins/imuset.py (live ``--imus``) and mavins/navfdi.py (``mavins nav IMU0 IMU1 ...
 --fdi-log``), docs/testing.md.
 
 In-process: real pymavlink messages (encoded by a sender, packed, parsed back) into ``ImuSet.sample``, real
@@ -30,7 +30,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mavins import fdi
+from mavins import navfdi as fdi  # the offline multi-IMU face (mavins/navfdi.py)
+from mavins.core import errmodel
 from mavins.core.fdi import FdiEvent
 from mavins.core.grades import grade_figures
 from mavins.core.settings import Strapdown
@@ -446,13 +447,13 @@ def test_reset_time_starts_over():
     assert s.sample(hr(1_500_000, 1)).t == 1.5
 
 
-# --- mavins/fdi.py ------------------------------------------------------------------------------------------------
+# --- mavins/navfdi.py ------------------------------------------------------------------------------------------------
 def test_imu_spec_from_grade_or_keys():
     """A grade name takes its figures; spec keys are in file units (60 deg/sqrt(h) = 1 deg/sqrt(s))."""
-    g = fdi.imu_spec("consumer")
+    g = errmodel.spec_of("consumer")
     fig = grade_figures("consumer")
     assert g.gyro_arw == fig.gyro.random_walk and g.accel_vrw == fig.accel.random_walk
-    k = fdi.imu_spec({"gyro_arw": 60.0, "accel_vrw": 120.0})
+    k = errmodel.spec_of({"gyro_arw": 60.0, "accel_vrw": 120.0})
     assert k.gyro_arw == pytest.approx(math.radians(1.0), rel=1e-15) and k.accel_vrw == pytest.approx(2.0)
 
 

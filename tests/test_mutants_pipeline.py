@@ -461,7 +461,7 @@ def test_imus_are_fused_before_the_engine():
     """--imus 0,1: both HIGHRES_IMU streams reach one ImuSet (docs/redundancy.md), the engine gets
     one sample per instant, the least-squares fusion of two identically mounted equal-noise IMUs:
     their mean."""
-    from mavins.aiding import FilterSettings
+    from mavins.livefilter import FilterSettings
     from mavins.imuset import ImuSet
     from mavins.link.ingest import IngestConfig
 
@@ -562,7 +562,7 @@ def test_outputs_filter_and_counters_are_recorded():
 def test_fdi_tests_are_recorded():
     """--imus: every window test of the set (time, sensor, statistic, threshold, residuals) reaches
     the recording as the set reports it."""
-    from mavins.aiding import FilterSettings
+    from mavins.livefilter import FilterSettings
     from mavins.link.ingest import IngestConfig
 
     p = pl.Pipeline(EngineConfig(filter=FilterSettings(spec="tactical")), IngestConfig(imus=(0, 1)))

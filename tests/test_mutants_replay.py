@@ -891,7 +891,7 @@ def test_ulog_magnetometer_without_its_fields_and_repeated_nan(tmp_path: Path) -
 # reaction) and no rotation, 100 Hz from sensor time 1.00 s. With --lat/--lon/--alt given, --align 0.5
 # and --rate 10 the alignment ends at 1.50 s and rows follow at 10 Hz until the last sample at 1.99 s.
 
-from mavins.aiding import FilterSettings  # noqa: E402
+from mavins.livefilter import FilterSettings  # noqa: E402
 from mavins.engine import EngineConfig  # noqa: E402
 from mavins.link.ingest import IngestConfig  # noqa: E402
 

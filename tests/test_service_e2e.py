@@ -598,7 +598,7 @@ def _serve_in_thread(svc) -> tuple[threading.Event, threading.Thread, list[BaseE
 
 def test_in_process_service_waits_for_gps_and_takes_its_origin() -> None:
     """No --lat/--lon/--alt: WAITING until the vehicle's GPS_RAW_INT, then the origin is that fix."""
-    from mavins.aiding import FilterSettings
+    from mavins.livefilter import FilterSettings
     from mavins.engine import EngineConfig
     from mavins.link.ingest import IngestConfig
     from mavins.service import Service, ServiceConfig

@@ -462,7 +462,7 @@ def test_the_service_aids_with_the_streamed_magnetometer() -> None:
     builds it) fed the decoded stream of the flight's first 4 s (at rest) with --aiding mag applies every
     streamed sample (10 Hz: each one is on the live path's 20 ms grid) after navigation starts (the first solution;
     the one at that instant may come before the filter does), all accepted; without mag_rate none."""
-    from mavins.aiding import FilterSettings
+    from mavins.livefilter import FilterSettings
     from mavins.engine import EngineConfig
     from mavins.pipeline import Pipeline
 

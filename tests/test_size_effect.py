@@ -30,7 +30,7 @@ from mavins.core.runner import navigate
 from mavins.core.size_effect import compensate
 from sim.generate import generate
 from sim.scenarios import load
-from sim.size_effect import size_effect_dv
+from sim.accel_offsets import size_effect_dv
 
 HALF_ANGLE = 2.0  # deg
 FREQ = 7.5  # Hz

@@ -253,13 +253,18 @@ def spec_from_grade(name: str) -> ImuSpec:
     )
 
 
+def spec_of(spec: str | ImuSpec | Mapping[str, float]) -> ImuSpec:
+    """ImuSpec from a grade name, an ImuSpec or the contract's spec keys."""
+    if isinstance(spec, str):
+        return spec_from_grade(spec)
+    if not isinstance(spec, ImuSpec):
+        return spec_from_keys(spec)
+    return spec
+
+
 def make_spec(spec: str | ImuSpec | Mapping[str, float], baro_drift: float = 0.0) -> np.ndarray:
     """Process-model vector from a grade name, an ImuSpec or the contract's spec keys."""
-    if isinstance(spec, str):
-        spec = spec_from_grade(spec)
-    elif not isinstance(spec, ImuSpec):
-        spec = spec_from_keys(spec)
-    return spec.as_array(baro_drift)
+    return spec_of(spec).as_array(baro_drift)
 
 
 # --- small dense linear algebra (explicit loops: numba's np.dot needs SciPy) --

@@ -17,13 +17,6 @@ FDI_COLUMNS = ("t", "event", "imu", "sensor", "axis", "statistic", "threshold")
 SAME_TIME = 1e-6  # s: rows of the IMU files must carry the same t to this
 
 
-def imu_spec(spec: str | dict[str, float]) -> Any:
-    """The core's ImuSpec from a grade name or the contract's spec keys."""
-    from .core import errmodel
-
-    return errmodel.spec_from_grade(spec) if isinstance(spec, str) else errmodel.spec_from_keys(spec)
-
-
 def read_imus(paths: Sequence[Path], init_t: float, rates: bool, sampled: bool) -> tuple[np.ndarray, np.ndarray]:
     """The rows of every IMU file after the initial state's time, checked to share their times.
 
@@ -75,6 +68,7 @@ def run_nav_fdi(imu_paths: Sequence[Path], init_path: Path, out_path: Path, fdi_
     the events. ``strapdown`` holds the ``strapdown.make_config`` keywords. Returns the solution rows
     and the events. Raises files.DataFileError (or ValueError) for unusable input; nothing is written
     then."""
+    from .core import errmodel
     from .core import strapdown as sd
     from .core.fdi import ImuSetMonitor
     from .core.runner import initial_state, to_file_units
@@ -92,7 +86,7 @@ def run_nav_fdi(imu_paths: Sequence[Path], init_path: Path, out_path: Path, fdi_
     t, data = read_imus(imu_paths, init.t, rates, sampled)
     dt = np.diff(np.concatenate(([init.t], t)))
     positive = dt[dt > 0.0]
-    mon = ImuSetMonitor(len(imu_paths), imu_spec(spec), float(np.median(positive)), window=window,
+    mon = ImuSetMonitor(len(imu_paths), errmodel.spec_of(spec), float(np.median(positive)), window=window,
                         false_alarm=false_alarm)
     g, a, events = mon.process(t, data[:, :, 0:3], data[:, :, 3:6], dt, rates=rates)
     cfg = sd.make_config(**strapdown)
