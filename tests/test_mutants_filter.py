@@ -547,6 +547,39 @@ def state(cfg=CFG) -> np.ndarray:
     return s
 
 
+def test_yaw_reset_turns_the_heading_and_puts_position_and_velocity_on_the_fix() -> None:
+    """kalman.yaw_reset by 150 deg onto a fix 120 m north and 80 m west (WGS-84 radii at the state's position)
+    with velocity (3, -4) m/s: the yaw 200 -> 350 deg with roll and pitch kept (a turn about the vertical),
+    the horizontal velocity is the fix's (the vertical and the previous update's vertical kept), the position
+    is the fix's and the height kept; the rows and columns of phi_D, dp_N, dp_E, dv_N, dv_E in P are the given
+    variances alone, every other entry of P unchanged; the biases untouched."""
+    s = state()
+    rng = np.random.default_rng(5)
+    a = rng.normal(size=(em.NX, em.NX))
+    P = a @ a.T
+    P0 = P.copy()
+    bias = np.arange(kf.B_SIZE, dtype=float)
+    d = 1.0 - E2 * math.sin(LAT) ** 2
+    r_n, r_e = A * (1.0 - E2) / d ** 1.5 + H0, (A / math.sqrt(d) + H0) * math.cos(LAT)
+    lat_fix, lon_fix = LAT + 120.0 / r_n, LON - 80.0 / r_e
+    kf.yaw_reset(s, CFG, bias, P, math.radians(150.0), 0.01, lat_fix, lon_fix, 4.0, 3.0, -4.0, 0.09)
+    row = np.zeros(sd.OUT_SIZE)
+    sd.solution_row(s, CFG, row, sd.GEOGRAPHIC)
+    np.testing.assert_allclose(np.degrees(row[7:10]), [5.0, -8.0, -10.0], atol=1e-9)
+    np.testing.assert_allclose(row[4:7], [3.0, -4.0, V0[2]], atol=1e-9)
+    np.testing.assert_allclose(s[sd.S_VP + 2], 1.0, atol=0)
+    assert abs(row[1] - lat_fix) * r_n < 1e-6 and abs(row[2] - lon_fix) * r_e < 1e-6 and abs(row[3] - H0) < 1e-6
+    reset = [em.X_PHI + 2, em.X_DP, em.X_DP + 1, em.X_DV, em.X_DV + 1]
+    for j, var in zip(reset, (0.01, 4.0, 4.0, 0.09, 0.09)):
+        want = np.zeros(em.NX)
+        want[j] = var
+        np.testing.assert_array_equal(P[j], want)
+        np.testing.assert_array_equal(P[:, j], want)
+    keep = [i for i in range(em.NX) if i not in reset]
+    np.testing.assert_array_equal(P[np.ix_(keep, keep)], P0[np.ix_(keep, keep)])
+    np.testing.assert_array_equal(bias, np.arange(kf.B_SIZE, dtype=float))
+
+
 def test_feedback_corrects_attitude_velocity_position_and_biases() -> None:
     """C <- exp(-[phi x]) C and q <- q(-phi) (x) q (docs/filter.md "Measurements"); v and v_prev -= dv;
     C_n^e <- C_n^e exp([xi x]), xi the transport rotation of (-dp_N, -dp_E) (Groves 5.4.1:
@@ -931,3 +964,18 @@ def test_module_level_layout() -> None:
             em.SP_ACC_BIAS, em.SP_ACC_GM, em.SP_ACC_TAU, em.SP_ACC_RRW, em.SP_BARO_DRIFT) == tuple(range(11))
     assert (kf.B_BG, kf.B_BA, kf.B_GG, kf.B_GA, kf.B_BARO, kf.B_SIZE) == (0, 3, 6, 9, 12, 13)
     np.testing.assert_array_equal(kf.ALL, np.ones(22))
+    np.testing.assert_array_equal(kf.ALL_BUT_HEADING, np.r_[1.0, 1.0, 0.0, np.ones(19)])  # phi_D held back
+
+
+def test_the_state_is_declared_once() -> None:
+    """errmodel.STATE is the one declaration: its blocks in the order and sizes of docs/filter.md "State",
+    each X_<NAME> its running offset, NX their sum, the sensor errors (kept as estimates by the feedback)
+    the five blocks from the gyro bias on, and kalman's bias vector those blocks at the same places."""
+    assert [(b.name, b.size) for b in em.STATE] == [("PHI", 3), ("DV", 3), ("DP", 3), ("BG", 3), ("BA", 3),
+                                                    ("GG", 3), ("GA", 3), ("BARO", 1)]
+    assert [b.name for b in em.STATE if b.sensor] == ["BG", "BA", "GG", "GA", "BARO"]
+    assert em.X_SENSORS == 9 and kf.B_SIZE == em.NX - em.X_SENSORS
+    for b in em.STATE:
+        assert getattr(em, f"X_{b.name}") == em.OFFSET[b.name]
+        if b.sensor:
+            assert getattr(kf, f"B_{b.name}") == em.OFFSET[b.name] - em.X_SENSORS

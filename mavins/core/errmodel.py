@@ -1,7 +1,8 @@
 """Error model of the strapdown solution in the NED frame (the filter's system model).
 
 Error state (docs/conventions.md "Aided navigation"; every error is *estimate minus
-truth*)::
+truth*), declared once in :data:`STATE` (named blocks; every index, size and the
+bias vector's layout derive from it)::
 
     x[0:3]   phi   attitude error (rad), C_b^n(true) = (I - [phi x]) C_b^n(est)
     x[3:6]   dv    velocity error (m/s, NED)
@@ -84,22 +85,42 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
+from typing import NamedTuple
+
 import numpy as np
 
 from . import earth, grades
 from .jit import kernel
 
-# --- error-state layout ---------------------------------------------------
-X_PHI = 0
-X_DV = 3
-X_DP = 6
-X_BG = 9
-X_BA = 12
-X_GG = 15
-X_GA = 18
-X_BARO = 21
-NX = 22
-N_CONTRACT = 15  # the contract's states; the rest follow them
+# --- error-state layout: declared once -------------------------------------
+class Block(NamedTuple):
+    """A named block of the error state: its name (``X_<NAME>`` is its first index), size, unit and
+    meaning; ``sensor``: a sensor error the feedback keeps as an estimate (kalman's bias vector)."""
+
+    name: str
+    size: int
+    unit: str
+    what: str
+    sensor: bool = False
+
+
+STATE = (
+    Block("PHI", 3, "rad", "attitude error phi: C_b^n(true) = (I - [phi x]) C_b^n(est)"),
+    Block("DV", 3, "m/s", "velocity error, NED"),
+    Block("DP", 3, "m", "position error, NED: dp_N = (R_N + h) dL, dp_E = (R_E + h) cos L dlambda, dp_D = -dh"),
+    Block("BG", 3, "rad/s", "gyro bias, constant and random-walk part", sensor=True),
+    Block("BA", 3, "m/s^2", "accelerometer bias, constant and random-walk part", sensor=True),
+    Block("GG", 3, "rad/s", "gyro bias, first-order Gauss-Markov part", sensor=True),
+    Block("GA", 3, "m/s^2", "accelerometer bias, Gauss-Markov part", sensor=True),
+    Block("BARO", 1, "m", "barometer offset", sensor=True),
+)
+OFFSET = {b.name: sum(a.size for a in STATE[:i]) for i, b in enumerate(STATE)}  # block -> first index
+NX = sum(b.size for b in STATE)
+# the blocks' first indices as module constants (numba takes module-level ints as compile-time constants)
+X_PHI, X_DV, X_DP = OFFSET["PHI"], OFFSET["DV"], OFFSET["DP"]
+X_BG, X_BA, X_GG, X_GA, X_BARO = OFFSET["BG"], OFFSET["BA"], OFFSET["GG"], OFFSET["GA"], OFFSET["BARO"]
+N_CONTRACT = OFFSET["GG"]  # the contract's states (attitude ... accelerometer bias); the rest follow them
+X_SENSORS = min(OFFSET[b.name] for b in STATE if b.sensor)  # the sensor errors run from here to the end
 
 # --- process-model vector (SI units) --------------------------------------
 SP_GYRO_ARW = 0  # rad/sqrt(s)

@@ -54,6 +54,7 @@ from .errmodel import (
     X_GA,
     X_GG,
     X_PHI,
+    X_SENSORS,
     _set_skew,
     matmul,
     matmul_bt,
@@ -65,12 +66,10 @@ ALL = np.ones(NX)  # update(): every state may be corrected
 ALL_BUT_HEADING = ALL.copy()  # update(): the heading is a consider state (unknown, not learnt: engine.GNSS_YAW_PENDING)
 ALL_BUT_HEADING[X_PHI + 2] = 0.0
 
-B_BG = 0
-B_BA = 3
-B_GG = 6
-B_GA = 9
-B_BARO = 12
-B_SIZE = 13
+# the bias vector: the sensor-error blocks of the state (errmodel.STATE), at the same places less X_SENSORS
+B_BG, B_BA, B_GG, B_GA, B_BARO = (X_BG - X_SENSORS, X_BA - X_SENSORS, X_GG - X_SENSORS, X_GA - X_SENSORS,
+                                  X_BARO - X_SENSORS)
+B_SIZE = NX - X_SENSORS
 
 
 @kernel
@@ -201,7 +200,7 @@ def feedback(s: np.ndarray, cfg: np.ndarray, bias: np.ndarray, x: np.ndarray) ->
     moved by ``-dp``: ``C_n^e <- C_n^e exp([xi x])`` with ``xi`` the transport
     rotation of that displacement (as strapdown.k_update moves it), height
     ``h <- h + dp_D``, and the latitude/longitude kept beside C_n^e
-    refreshed (strapdown.sync_position); biases ``bias -= x[X_BG:]``.
+    refreshed (strapdown.sync_position); biases ``bias -= x[X_SENSORS:]``.
     """
     q0, q1, q2, q3 = quat_mul_s(rotvec_to_quat_s(-x[X_PHI], -x[X_PHI + 1], -x[X_PHI + 2]),
                                 (s[sd.S_Q], s[sd.S_Q + 1], s[sd.S_Q + 2], s[sd.S_Q + 3]))
@@ -223,7 +222,7 @@ def feedback(s: np.ndarray, cfg: np.ndarray, bias: np.ndarray, x: np.ndarray) ->
     s[sd.S_H] += x[X_DP + 2]
     sd.sync_position(s, cfg, GEOGRAPHIC)
     for i in range(B_SIZE):
-        bias[i] -= x[X_BG + i]
+        bias[i] -= x[X_SENSORS + i]
     for i in range(x.shape[0]):
         x[i] = 0.0
 

@@ -49,11 +49,15 @@ COLORS = {
 XYZ = [COLORS["x"], COLORS["y"], COLORS["z"]]
 
 
-def _line_radius():  # type: ignore[no-untyped-def]
-    """Trajectory line width in screen points, readable at any zoom."""
+TRAJECTORY_POINTS = 1.5  # the estimated trajectory's line width (screen points, readable at any zoom)
+TRUTH_POINTS = 3.5  # the truth's: wider, so where the estimate lies on it the truth still shows round it
+
+
+def _line_radius(points: float = TRAJECTORY_POINTS):  # type: ignore[no-untyped-def]
+    """A trajectory line width in screen points (the same at any zoom)."""
     import rerun as rr
 
-    return rr.components.Radius.ui_points(1.5)
+    return rr.components.Radius.ui_points(points)
 
 
 def _free_port() -> int:
@@ -250,7 +254,7 @@ class Recorder:
         step = max(1, len(tr) // TRAJ_POINTS)
         pts = [local_ned(math.radians(r[1]), math.radians(r[2]), r[3], origin) for r in tr[::step]]
         self.rec.log("/world/trajectory/truth", self.rr.LineStrips3D([np.array(pts)], colors=[COLORS["truth"]],
-                                                                        radii=_line_radius()), static=True)
+                                                                        radii=_line_radius(TRUTH_POINTS)), static=True)
 
     def _trajectory(self, t: float, ned: np.ndarray) -> None:
         self._traj_n += 1
