@@ -32,6 +32,7 @@ from pathlib import Path
 
 from . import files
 from .core import magmodel
+from .core.gpstime import unix_of_gps
 from .core.records import Solution
 from .engine import EngineConfig
 from .files import FOUND, DataFileError, SolutionWriter, sniff
@@ -530,17 +531,6 @@ def _df_value(v: tuple, fmt: str, index: dict[str, int], name: str, default: flo
     return float(v[i]) / 100.0 if fmt[i] in DF_HUNDREDTHS else float(v[i])
 
 
-GPS_EPOCH_UNIX = 315964800.0  # s: 1980-01-06T00:00:00Z, the start of GPS week 0 (IS-GPS-200 20.3.3.5.2.4)
-
-
-def gps_unix(week: float, ms_of_week: float) -> float:
-    """UNIX time (s) of a GPS week and millisecond of week, without the leap seconds (18 s since
-    2017): the date to within a minute, which is what the magnetic model needs. NaN if unknown."""
-    if not (math.isfinite(week) and math.isfinite(ms_of_week)) or week <= 0:
-        return math.nan
-    return GPS_EPOCH_UNIX + week * 604800.0 + ms_of_week * 1e-3
-
-
 def df_gps(enc: mavlink.MAVLink, dec: mavlink.MAVLink, t_us: int, gps: dict[str, float],
            gpa: dict[str, float] | None) -> mavlink.MAVLink_message:
     """GPS_RAW_INT of an ArduPilot ``GPS`` record (and its ``GPA``, if logged), values already in the
@@ -645,7 +635,7 @@ def _bin_messages(path: Path, report: LogReport) -> Iterator[tuple[float, mavlin
                             yield from gps_out(None)
                             pending = (t_us, off, values)
                             if not dated:  # the UTC date for the magnetic model, from the first dated fix
-                                unix = gps_unix(values.get("GWk", math.nan), values.get("GMS", math.nan))
+                                unix = unix_of_gps(values.get("GWk", math.nan), values.get("GMS", math.nan))
                                 if magmodel.plausible_unix(unix):
                                     dated = True
                                     yield off / size, system_time(enc, dec, t_us, int(unix * 1e6))

@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .core import jit
+from .core.gpstime import gps_week_ms
 from .core import strapdown as sd
 from .core.runner import rest_state
 from .core.settings import strapdown_of
@@ -47,8 +48,6 @@ SYS_STATUS_PERIOD = 1.0  # s
 STATUS_RATE_HZ = 1.0  # ESTIMATOR_STATUS, EKF_STATUS_REPORT and SYSTEM_TIME per second of sensor time
 GPS_INPUT_RATE_HZ = 5.0  # GPS_INPUT per second of sensor time (--gps-input)
 UNIX_USEC_MIN = 1_000_000_000_000_000  # a GNSS time_usec above this (2001-09-09) is UNIX time, i.e. UTC
-GPS_EPOCH_UNIX_S = 315964800.0  # 1980-01-06 00:00:00 UTC
-GPS_LEAP_S = 18.0  # GPS - UTC since 2017-01-01 (IERS Bulletin C)
 HELPER_WAIT_S = 120.0  # s: the cold-start compile helper is waited for at most this long, then stopped
 DRAIN_S = 2.0  # s: on a stop, input already in the socket is processed for at most this long
 
@@ -289,9 +288,7 @@ class Service:
         """GPS week and milliseconds of sensor time t when the GNSS input carries UTC."""
         if self._utc_offset is None:
             return None
-        gps_s = t + self._utc_offset - GPS_EPOCH_UNIX_S + GPS_LEAP_S
-        week = int(gps_s // 604800)
-        return week, int(round((gps_s - week * 604800) * 1000.0))
+        return gps_week_ms(t + self._utc_offset)
 
     def _periodic(self) -> None:
         now = time.monotonic()
