@@ -27,6 +27,7 @@ import math
 import socket
 import subprocess
 import threading
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -48,6 +49,7 @@ START = ("47.397742", "8.545594", "488.0")
 @dataclass
 class Received:
     msgs: dict[str, list] = field(default_factory=dict)
+    sync_window_ns: tuple[int, int] = (0, 0)  # CLOCK_MONOTONIC (ns) before the TIMESYNC request, after the run
 
     def of(self, name: str) -> list:
         return self.msgs.get(name, [])
@@ -86,10 +88,14 @@ def _run(tmp: Path, *extra: str) -> tuple[Received, str]:
                                    stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=ENV, cwd=tmp, text=True)
             wait_for_line(log_path, "NAVIGATING", svc)
             req = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
+            t_req = time.monotonic_ns()
             with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as gcs:
                 gcs.sendto(req.timesync_encode(0, 123456789).pack(req), ("127.0.0.1", port))
+                # a response to someone's request (tc1 != 0): never answered
+                gcs.sendto(req.timesync_encode(555, 987654321).pack(req), ("127.0.0.1", port))
             _, err = sim.communicate(timeout=600)
             assert sim.returncode == 0, err
+            got.sync_window_ns = (t_req, time.monotonic_ns())
     finally:
         stop.set()
         th.join(5)
@@ -174,9 +180,15 @@ def test_gps_input_carries_the_solution(aided: tuple[Received, str]) -> None:
 
 
 def test_timesync_request_is_answered(aided: tuple[Received, str]) -> None:
+    """A request (tc1 = 0, ts1 = 123456789) is answered once with ts1 echoed and tc1 the service's clock in
+    nanoseconds (common.xml TIMESYNC; its clock is CLOCK_MONOTONIC, the same on the whole machine, so tc1
+    lies between this test's monotonic ns before the request and after the run: a clock in us or ms would be
+    1e3 to 1e6 too small). The response (tc1 = 555) to somebody else's request is left unanswered."""
     got, log = aided
     answers = [m for m in got.of("TIMESYNC") if m.ts1 == 123456789]
-    assert answers and all(m.tc1 > 0 for m in answers), log
+    lo, hi = got.sync_window_ns
+    assert len(answers) == 1 and lo <= answers[0].tc1 <= hi, (answers, lo, hi, log)
+    assert not [m for m in got.of("TIMESYNC") if m.ts1 == 987654321]
 
 
 def test_free_inertial_is_flagged_and_its_uncertainty_grows(free: tuple[Received, str]) -> None:
