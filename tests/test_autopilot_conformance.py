@@ -50,6 +50,7 @@ START = ("47.397742", "8.545594", "488.0")
 class Received:
     msgs: dict[str, list] = field(default_factory=dict)
     sync_window_ns: tuple[int, int] = (0, 0)  # CLOCK_MONOTONIC (ns) before the TIMESYNC request, after the run
+    nav: Path | None = None  # the service's own solution file (-o): the filter's sigmas row by row
 
     def of(self, name: str) -> list:
         return self.msgs.get(name, [])
@@ -79,7 +80,8 @@ def _run(tmp: Path, *extra: str) -> tuple[Received, str]:
     th.start()
     log_path = tmp / "svc.log"
     try:
-        with running_service(log_path, "--master", f"udpin:127.0.0.1:{port}", "--out",
+        got.nav = tmp / "nav.csv"
+        with running_service(log_path, "--master", f"udpin:127.0.0.1:{port}", "-o", str(got.nav), "--out",
                              f"udpout:127.0.0.1:{client.getsockname()[1]}", "--lat", START[0], "--lon", START[1],
                              "--alt", START[2], "--heading", "vehicle", "--align", "5", "--rate", "10",
                              "--grade", "tactical", *extra, cwd=tmp) as svc:
@@ -153,6 +155,37 @@ def test_odometry_is_what_ekf2_and_ekf3_fuse(aided: tuple[Received, str]) -> Non
         assert math.sqrt(0.5 * (m.pose_covariance[0] + m.pose_covariance[6])) <= 5.0
         assert 1 <= m.quality <= 100
     assert len({m.reset_counter for m in last}) == 1  # no reset at rest with steady GNSS
+
+
+def test_odometry_covariances_are_the_filters_sigmas(aided: tuple[Received, str]) -> None:
+    """Each ODOMETRY's pose covariance holds the variances of the solution file's own row of the same
+    time (docs/conventions.md ODOMETRY): sigma_n^2, sigma_e^2, sigma_d^2 (m^2), roll and pitch the mean
+    of the north and east attitude variances, yaw the down one (the file's deg as rad^2); float32 on the
+    wire (relative 1e-6). The body velocity variances are the diagonal of C_n^b P_v C_b^n with C_b^n from
+    the row's own quaternion (the contract's q_nb, Hamilton, scalar first): at rest with yaw 30 deg they mix
+    north and east, vx about cos^2 30 sigma_vn^2 + sin^2 30 sigma_ve^2."""
+    got, log = aided
+    header = got.nav.read_text().splitlines()[0].split(",")  # type: ignore[union-attr]
+    nav = np.loadtxt(got.nav, delimiter=",", skiprows=1, ndmin=2)
+    col = {k: header.index(k) for k in header}
+    by_t = {round(r[0] * 1e6): r for r in nav}
+    checked = 0
+    for m in got.of("ODOMETRY"):
+        r = by_t.get(m.time_usec)
+        if r is None:
+            continue
+        att = np.radians([r[col["sigma_att_n"]], r[col["sigma_att_e"]], r[col["sigma_att_d"]]]) ** 2
+        want = [r[col["sigma_n"]] ** 2, r[col["sigma_e"]] ** 2, r[col["sigma_d"]] ** 2,
+                0.5 * (att[0] + att[1]), 0.5 * (att[0] + att[1]), att[2]]
+        np.testing.assert_allclose([m.pose_covariance[i] for i in DIAG], want, rtol=1e-6)
+        w, x, y, z = (r[col[k]] for k in ("qw", "qx", "qy", "qz"))
+        c_bn = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                         [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                         [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+        var_n = np.array([r[col["sigma_vn"]], r[col["sigma_ve"]], r[col["sigma_vd"]]]) ** 2
+        np.testing.assert_allclose([m.velocity_covariance[i] for i in DIAG[:3]], (c_bn ** 2).T @ var_n, rtol=1e-6)
+        checked += 1
+    assert checked > 100, (checked, log)
 
 
 def test_estimator_status_and_ekf_status_report(aided: tuple[Received, str]) -> None:
