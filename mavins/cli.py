@@ -567,7 +567,11 @@ def _nav_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--alt", type=_real(-1e4, 1e6), metavar="M", help="initial ellipsoidal height")
     g.add_argument("--heading", type=_Heading(), default="auto", metavar="DEG|SOURCE",
                    help="initial yaw in degrees, or a source: vehicle (its ATTITUDE), mag (magnetometer), "
-                        "gyrocompass (navigation-grade gyros), auto (vehicle, else mag, else gyrocompass)")
+                        "gyrocompass (navigation-grade gyros), auto (vehicle, else a dual-antenna GNSS yaw, else "
+                        "mag, else gyrocompass, or with coarse gyros the heading from GNSS velocity once moving)")
+    g.add_argument("--gnss-yaw-offset", type=_real(-180.0, 180.0), default=0.0, metavar="DEG",
+                   help="azimuth of the dual-antenna GNSS baseline in the body (FRD, 0 = along x, 90 = to the right): "
+                        "the vehicle's heading is the receiver's yaw (GPS_RAW_INT yaw) minus this")
     _magnetic_options(g, "the vehicle's (SYSTEM_TIME; a log's GPS time), else today's")
     g.add_argument("--gyro-bias", choices=("estimate", "none"), default="estimate",
                    help="estimate = remove the mean gyro minus Earth rate of the static window (not with gyrocompass)")
@@ -683,6 +687,7 @@ def _engine_config(args: argparse.Namespace):  # type: ignore[no-untyped-def]
         raise ValueError(f"--frame {strapdown.frame} navigates free inertial only (the filter works in the "
                          "geographic frame): add --aiding none")
     return EngineConfig(lat=args.lat, lon=args.lon, alt=args.alt, heading=heading, declination=args.declination,
+                        gnss_yaw_offset=args.gnss_yaw_offset,
                         mag_year=args.date, align=args.align, rate=args.rate, gyro_bias=args.gyro_bias, max_gap=args.max_gap,
                         filter=flt, geoid_height=args.geoid_height, **strapdown.keywords())
 

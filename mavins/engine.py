@@ -33,6 +33,7 @@ class State(str, Enum):
 
 
 HEADING_WORDS = ("auto", "gyrocompass", "mag", "vehicle")
+GNSS_HEADING = "GNSS yaw"  # a dual-antenna receiver's heading (GPS_RAW_INT yaw)
 GNSS_YAW = "GNSS velocity"  # the heading source once the yaw estimator (core/yawgsf.py) has converged
 GNSS_YAW_PENDING = "GNSS velocity (pending)"  # aligned without a heading source: yaw unknown until the vehicle moves
 GSF_RESET_SIGMA_DEG = 5.0  # deg: the estimator's yaw 1-sigma below which the solution's heading is reset to it
@@ -52,6 +53,7 @@ class EngineConfig:
     lon: float | None = None
     alt: float | None = None
     heading: float | str = "auto"
+    gnss_yaw_offset: float = 0.0  # deg: the GNSS antenna baseline's azimuth in the body (FRD, 0 = along x)
     declination: float | None = None  # deg, east positive; None: the World Magnetic Model's at the position
     mag_year: float | None = None  # decimal year for the magnetic model; None: the stream's SYSTEM_TIME, else today
     align: float = 10.0
@@ -111,6 +113,7 @@ class Engine:
     _next_mag: float = field(init=False, default=-math.inf)
     _row: np.ndarray = field(init=False, default_factory=lambda: np.zeros(sd.OUT_SIZE))
     _unix_date: float | None = field(init=False, default=None)  # s: UNIX time the stream reported (SYSTEM_TIME)
+    _antenna_yaw: float | None = field(init=False, default=None)  # rad: the vehicle's heading from the latest GNSS yaw
     declination: float = field(init=False, default=0.0)  # deg: the one used by the alignment and the filter
     _gsf: tuple[np.ndarray, np.ndarray, np.ndarray] | None = field(init=False, default=None)  # yaw bank (X, P, logw)
     _gsf_inc: list[float] = field(init=False, default_factory=lambda: [0.0] * 7)  # dv_b, dtheta_b, dt since the update
@@ -170,6 +173,16 @@ class Engine:
                                 f"{f.intensity / 1000.0:.1f} uT) from {f.model} at the initial position for {year:.2f}, "
                                 f"{when}" + (" (outside the model's years: extrapolated)" if f.extrapolated else ""))
         return f.declination
+
+    def on_gnss_yaw(self, t: float | None, yaw: float, sigma: float) -> None:
+        """A dual-antenna GNSS heading (rad, of the antenna baseline; 1-sigma rad) stamped t on the IMU
+        clock (None: now): the vehicle's heading is it less ``gnss_yaw_offset``. Before navigation it is
+        a heading source for the alignment; while navigating, a heading measurement (with GNSS aiding)."""
+        vehicle = math.remainder(yaw - math.radians(self.cfg.gnss_yaw_offset), 2.0 * math.pi)
+        self._antenna_yaw = vehicle
+        if self.state is State.NAVIGATING and self._s is not None and self._gsf is None:
+            t_m = sd.state_time(self._s) if t is None else t
+            self.filter.measure(self._s, self._kcfg, t_m, "gnss_yaw", vehicle, sigma)
 
     def set_vehicle_yaw(self, yaw_rad: float) -> None:
         """The vehicle's own heading (from its ATTITUDE), a heading source for alignment."""
@@ -308,6 +321,8 @@ class Engine:
                 self._event("WARNING", "no vehicle ATTITUDE seen: heading from gyrocompass")
             else:
                 return self._vehicle_yaw, "vehicle ATTITUDE"
+        if h == "auto" and self._antenna_yaw is not None:
+            return self._antenna_yaw, GNSS_HEADING
         if h == "mag" or (h == "auto" and has_mag):
             if has_mag:
                 return align.mag_heading(m_mean, roll, pitch, math.radians(self.declination)), "magnetometer"
@@ -412,12 +427,12 @@ class Engine:
             self.set_position(lat, lon, h, source, sigma_h)
             return
         t_m = sd.state_time(self._s) if t is None else t
-        if self._gsf is not None and not self._gnss_yaw(lat, lon, vel, sigma_h, sigma_vel):
+        if self._gsf is not None and not self._gsf_fix(lat, lon, vel, sigma_h, sigma_vel):
             return
         self.filter.measure(self._s, self._kcfg, t_m, "gnss", math.radians(lat), math.radians(lon), h, vel,
                             sigma_h, sigma_v, sigma_vel)
 
-    def _gnss_yaw(self, lat: float, lon: float, vel: tuple[float, float, float] | None, sigma_h: float,
+    def _gsf_fix(self, lat: float, lon: float, vel: tuple[float, float, float] | None, sigma_h: float,
                   sigma_vel: float) -> bool:
         """While the heading is pending: a fix's horizontal velocity updates the yaw estimator; once its
         yaw 1-sigma is below GSF_RESET_SIGMA_DEG the solution's heading, horizontal position and velocity

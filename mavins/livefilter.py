@@ -149,6 +149,8 @@ class LiveFilter:
             return min(1.0, self.settings.sigma_yaw)  # an autopilot EKF heading: about 1 deg
         if source == "magnetometer":
             return min(5.0, self.settings.sigma_yaw)
+        if source == "GNSS yaw":  # engine.GNSS_HEADING: a dual-antenna receiver, about 1 deg
+            return min(2.0, self.settings.sigma_yaw)
         if source == "GNSS velocity (pending)":  # engine.GNSS_YAW_PENDING: any heading, uniform on the circle
             return 180.0 / math.sqrt(3.0)
         if source == "gyrocompass":
@@ -196,12 +198,14 @@ class LiveFilter:
     def measure(self, s: np.ndarray, cfg: np.ndarray, t_m: float, kind: str, *args: object) -> None:
         """A measurement stamped t_m (s, IMU clock): applied now if the solution has passed it,
         else when it does. Kinds: ``gnss`` (lat, lon rad, h m, vel NED or None, sigma_h, sigma_v,
-        sigma_vel), ``baro`` (h m, sigma), ``mag`` (m_b body), ``zupt`` (). A kind with a delay
+        sigma_vel), ``gnss_yaw`` (the vehicle's heading rad, sigma rad; with GNSS aiding), ``baro`` (h m,
+        sigma), ``mag`` (m_b body), ``zupt`` (). A kind with a delay
         (``--gnss-delay`` ...) was measured that long before t_m and is fused at that time: taken back
         along the solution like any measurement older than the last attitude update (kalman.py)."""
-        if kind not in self.settings.aiding:
+        aid = "gnss" if kind == "gnss_yaw" else kind  # a dual-antenna heading comes with GNSS aiding
+        if aid not in self.settings.aiding:
             return
-        t_m -= self.settings.delays.get(kind, 0.0)
+        t_m -= self.settings.delays.get(aid, 0.0)
         if t_m > sd.state_time(s):
             if len(self._pending) < 64:
                 self._pending.append((t_m, kind, args))
@@ -249,6 +253,9 @@ class LiveFilter:
                     m_n, math.radians(self.settings.declination), kalman.mag_inclination(self._incl, m_n),
                     math.radians(self.settings.sigma_mag))):
                 kalman.mag_accept(self._incl, m_n)
+        elif kind == "gnss_yaw":  # the heading of a dual-antenna receiver, the vehicle's (rad, 1-sigma rad)
+            yaw, sigma = args
+            self._update(s, cfg, "gnss_yaw", ("mag",), kalman.heading(s, yaw, sigma))
         elif kind == "zupt":
             self._update(s, cfg, "zupt", ("vel",), kalman.zupt(s, self.settings.sigma_zupt))
 
@@ -320,7 +327,7 @@ def warm_measurements() -> None:
     f.start(s, cfg, np.zeros(3), 0.01)
     for kind, args in (("zupt", ()), ("gnss", (math.radians(45.0), math.radians(7.0), 100.0, (0.0, 0.0, 0.0), 1.0, 2.0, 0.3)),
                        ("gnss", (math.radians(45.0), math.radians(7.0), 100.0, (0.0, 0.0, math.nan), 1.0, 2.0, 0.3)),
-                       ("baro", (100.0, 0.5)), ("mag", ((0.2, 0.0, 0.4),))):
+                       ("baro", (100.0, 0.5)), ("mag", ((0.2, 0.0, 0.4),)), ("gnss_yaw", (0.1, 0.02))):
         f.measure(s, cfg, 0.0, kind, *args)
     # the heading from GNSS velocity (engine.GNSS_YAW_PENDING): the yaw bank and the reset
     from .core import yawgsf

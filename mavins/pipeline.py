@@ -97,6 +97,9 @@ class Pipeline:
             else:
                 t, lat, lon, h, vel, sig_h, sig_v, sig_vel = fix
                 self.engine.on_gnss(self._on_imu_clock(t), lat, lon, h, vel, sig_h, sig_v, sig_vel, name)
+                yaw = gnss_heading(msg)
+                if yaw is not None:  # a dual-antenna (moving-base) receiver's heading
+                    self.engine.on_gnss_yaw(self._on_imu_clock(t), *yaw)
                 origin = self.engine.origin
                 if self.recorder is not None and origin is not None and self.last_sample is not None:
                     self.recorder.on_gnss(self.last_sample.t, local_ned(math.radians(lat), math.radians(lon), h, origin))
@@ -237,6 +240,23 @@ def ground_velocity(vel_cm_s: int, cog_cdeg: int) -> tuple[float, float, float] 
         return None
     speed, course = vel_cm_s / 100.0, math.radians(cog_cdeg / 100.0)
     return speed * math.cos(course), speed * math.sin(course), math.nan
+
+
+GNSS_YAW_SIGMA_DEG = 1.0  # deg: 1-sigma of a GNSS heading whose message gives no accuracy (hdg_acc 0)
+
+
+def gnss_heading(msg: object) -> tuple[float, float] | None:
+    """The heading of a dual-antenna receiver in GPS_RAW_INT / GPS2_RAW (common.xml): ``yaw`` in cdeg
+    from true north, clockwise, 0 = not available and 36000 = north; ``hdg_acc`` its 1-sigma in degE5
+    (0: unknown, GNSS_YAW_SIGMA_DEG). Returns (rad, rad) in (-pi, pi], or None."""
+    if msg.get_type() not in ("GPS_RAW_INT", "GPS2_RAW"):  # type: ignore[attr-defined]
+        return None
+    y = getattr(msg, "yaw", 0)
+    if not 0 < y <= 36000:
+        return None
+    acc = getattr(msg, "hdg_acc", 0)
+    sigma = acc * 1e-5 if acc > 0 else GNSS_YAW_SIGMA_DEG
+    return math.radians(math.remainder(y / 100.0, 360.0)), math.radians(sigma)
 
 
 def gnss_invalid(fix: tuple) -> str | None:

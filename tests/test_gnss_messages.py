@@ -5,6 +5,8 @@ units of each field) and docs/filter.md (accuracy limit), never from the decoder
 """
 from __future__ import annotations
 
+import math
+
 import pytest
 
 from mavins.link.mavlink import mavlink
@@ -95,3 +97,33 @@ def test_unknown_speed_or_course_gives_no_velocity(vel: int, cog: int) -> None:
     """UINT16_MAX means unknown (common.xml); a course of 360.00 deg or more is not one: position only."""
     fix = gnss_fix(_raw_vel(vel, cog), geoid_height=0.0)
     assert fix is not None and gnss_invalid(fix) is None and fix[4] is None and fix[7] == 0.3
+
+
+# --- a dual-antenna receiver's heading: GPS_RAW_INT / GPS2_RAW yaw, hdg_acc ---------------------------------
+def _raw_yaw(yaw: int, hdg_acc: int = 0, name: str = "GPS_RAW_INT") -> object:
+    if name == "GPS2_RAW":
+        return _decoded(ENC.gps2_raw_encode(7_000_000, 3, LAT, LON, 488000, 80, 120, 0, 0, 12, 0, 0, yaw=yaw,
+                                            alt_ellipsoid=0, h_acc=0, v_acc=0, vel_acc=0, hdg_acc=hdg_acc))
+    return _decoded(ENC.gps_raw_int_encode(7_000_000, 3, LAT, LON, 488000, 80, 120, 0, 0, 12, alt_ellipsoid=0,
+                                           h_acc=0, v_acc=0, vel_acc=0, hdg_acc=hdg_acc, yaw=yaw))
+
+
+@pytest.mark.parametrize("name", ["GPS_RAW_INT", "GPS2_RAW"])
+@pytest.mark.parametrize("yaw, deg", [(36000, 0.0), (9000, 90.0), (18000, 180.0), (27050, -89.5), (1, 0.01)])
+def test_dual_antenna_heading_in_cdeg_from_north(name: str, yaw: int, deg: float) -> None:
+    """common.xml: yaw in cdeg clockwise from true north, 36000 for north (0 means not available); the heading
+    comes back in rad in (-180, 180] deg; hdg_acc is degE5 (150000 = 1.5 deg), 0 unknown (1 deg)."""
+    from mavins.pipeline import gnss_heading
+
+    h = gnss_heading(_raw_yaw(yaw, 150000, name))
+    assert h is not None and abs(math.degrees(h[0]) - deg) < 1e-9 and abs(math.degrees(h[1]) - 1.5) < 1e-12
+    assert abs(math.degrees(gnss_heading(_raw_yaw(yaw, 0, name))[1]) - 1.0) < 1e-12
+
+
+def test_no_heading_when_the_receiver_has_none() -> None:
+    """yaw 0 is 'not available'; above 36000 is no heading; a GPS_INPUT carries no hdg_acc here."""
+    from mavins.pipeline import gnss_heading
+
+    assert gnss_heading(_raw_yaw(0)) is None and gnss_heading(_raw_yaw(36001)) is None
+    assert gnss_heading(_decoded(ENC.gps_input_encode(5_000_000, 0, 0, 0, 0, 3, LAT, LON, 488.0, 1.0, 1.0,
+                                                      0.0, 0.0, 0.0, 0.3, 1.0, 2.0, 10, yaw=9000))) is None

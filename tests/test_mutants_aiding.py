@@ -787,6 +787,27 @@ def test_magnetometer_samples_far_from_the_model_are_disturbances(incl_deg, stre
     assert f.counters["mag_disturbed"] == 0 and f.counters["mag_accepted"] + f.counters["mag_rejected"] == 1
 
 
+def test_gnss_yaw_by_hand() -> None:
+    """A dual-antenna heading of 0.1 rad (sigma 0.1) on a level solution at yaw 0 with P_yaw = R = 0.01:
+    half of it is taken (yaw 0.05, P_yaw 0.005: x = P/(P + R) nu), counted gnss_yaw, its test ratio
+    published as the heading's ((0.1 / sqrt(0.02)) / 5)^2. It comes with GNSS aiding: without it, ignored;
+    the GNSS delay moves it too."""
+    s = state()
+    f = live(s, p={em.X_PHI + 2: 0.01})
+    f.measure(s, CFG, T0, "gnss_yaw", 0.1, 0.1)
+    assert yaw(s) == pytest.approx(0.05, abs=1e-12) and f.P[em.X_PHI + 2, em.X_PHI + 2] == pytest.approx(0.005)
+    assert f.counters == {"gnss_yaw_accepted": 1}
+    assert f.ratios["mag"] == pytest.approx(0.01 / 0.02 / 25.0, rel=1e-12)
+    s = state()
+    f = live(s, aiding=("baro", "mag"), p={em.X_PHI + 2: 0.01})
+    f.measure(s, CFG, T0, "gnss_yaw", 0.1, 0.1)
+    assert yaw(s) == 0.0 and not f.counters
+    s = state()
+    f = live(s, p={em.X_PHI + 2: 0.01}, delays={"gnss": 0.5})
+    f.measure(s, CFG, T0 + 0.5, "gnss_yaw", 0.1, 0.1)  # measured at t0: applied now
+    assert f.counters == {"gnss_yaw_accepted": 1}
+
+
 def test_zupt_by_hand() -> None:
     """v = (0.02, -0.04, 0.01) m/s, P_v = sigma_zupt^2 = 0.05^2: a ZUPT halves the velocity; ratio
     (0.04 / sqrt(0.005) / 5)^2 = 0.0128; a 10 m/s velocity is rejected by the gate."""
@@ -860,5 +881,5 @@ def test_warm_measurements_runs_every_kind_once() -> None:
         mp.undo()
     (f,) = made
     assert f.settings.aiding == AIDING_KINDS
-    for kind, n in (("gnss_pos", 2), ("gnss_vel", 2), ("baro", 1), ("mag", 1), ("zupt", 1)):
+    for kind, n in (("gnss_pos", 2), ("gnss_vel", 2), ("baro", 1), ("mag", 1), ("zupt", 1), ("gnss_yaw", 1)):
         assert f.counters[f"{kind}_accepted"] + f.counters[f"{kind}_rejected"] == n, kind

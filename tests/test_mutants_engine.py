@@ -958,3 +958,30 @@ def test_a_given_declination_wins_and_the_field_is_still_checked():
     assert e.declination == 4.5 and e.filter.settings.declination == 4.5
     assert e.filter.settings.mag_model is not None
     assert not any("magnetic declination" in t for t in texts(e))
+
+
+# --- a dual-antenna GNSS heading (GPS_RAW_INT yaw) ---------------------------------------------------------
+def test_alignment_takes_a_dual_antenna_heading_less_the_baseline_offset():
+    """--heading auto with a GNSS yaw of 120 deg from a baseline mounted 90 deg to the right (FRD): the vehicle
+    heads 30 deg, the source is named, and it wins over the magnetometer (the samples carry M_N, whose own
+    heading is different); the filter starts with the GNSS heading's 2 deg 1-sigma."""
+    e = Engine(cfg(heading="auto", gnss_yaw_offset=90.0, declination=0.0))
+    e.on_gnss_yaw(None, math.radians(120.0), math.radians(0.5))
+    align(e)
+    assert e.heading_used == "GNSS yaw"
+    row = e._row.copy()
+    e._solution_row(e._s, e._kcfg, row)
+    assert math.degrees(row[9]) == pytest.approx(30.0, abs=1e-9)
+    assert math.sqrt(e.filter.P[2, 2]) == pytest.approx(math.radians(2.0), rel=1e-12)
+
+
+def test_a_dual_antenna_heading_while_navigating_is_a_heading_update():
+    """Navigating with GNSS aiding, a GNSS yaw is fused (counted gnss_yaw); without GNSS aiding, ignored."""
+    e = Engine(cfg(heading=30.0, filter=FilterSettings(aiding=("gnss",))))
+    align(e)
+    e.on_gnss_yaw(None, math.radians(31.0), math.radians(1.0))
+    assert e.filter.counters["gnss_yaw_accepted"] == 1
+    e = Engine(cfg(heading=30.0))
+    align(e)
+    e.on_gnss_yaw(None, math.radians(31.0), math.radians(1.0))
+    assert not e.filter.counters

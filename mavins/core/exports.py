@@ -38,6 +38,7 @@ EXPORTS = (
     Export("kalman", "mag_accept", f"none({V}, {V})"),
     Export("kalman", "mag_heading", f"{MEASUREMENT}({V}, f8, f8, f8)"),
     Export("kalman", "zupt", f"{MEASUREMENT}({V}, f8)"),
+    Export("kalman", "heading", f"{MEASUREMENT}({V}, f8, f8)"),
     Export("kalman", "yaw_reset", f"none({V}, {V}, {V}, {M}, f8, f8, f8, f8, f8, f8, f8, f8)"),
     Export("yawgsf", "predict", f"none({M}, {C}, {V}, {V}, f8, f8, f8, f8)"),
     Export("yawgsf", "update", f"none({M}, {C}, {V}, f8, f8, f8)"),
