@@ -22,7 +22,7 @@ from .core import strapdown as sd
 from .core.jit import for_frame
 from .core.records import ImuSample, Solution
 from .core.settings import Strapdown, strapdown_of
-from .livefilter import FilterSettings, LiveFilter
+from .livefilter import GNSS_HEADING, GNSS_YAW_PENDING, FilterSettings, LiveFilter
 from .core.rotation import euler_to_dcm
 
 
@@ -33,9 +33,7 @@ class State(str, Enum):
 
 
 HEADING_WORDS = ("auto", "gyrocompass", "mag", "vehicle")
-GNSS_HEADING = "GNSS yaw"  # a dual-antenna receiver's heading (GPS_RAW_INT yaw)
 GNSS_YAW = "GNSS velocity"  # the heading source once the yaw estimator (core/yawgsf.py) has converged
-GNSS_YAW_PENDING = "GNSS velocity (pending)"  # aligned without a heading source: yaw unknown until the vehicle moves
 GSF_RESET_SIGMA_DEG = 5.0  # deg: the estimator's yaw 1-sigma below which the solution's heading is reset to it
 GSF_MOVING_MS = 1.0  # m/s: while the yaw is pending, faster fixes are not fused (the heading is unknown)
 MAX_HEIGHT = 1.0e6  # m: beyond this (either sign) the solution has diverged
@@ -152,9 +150,10 @@ class Engine:
         if self._unix_date is None and magmodel.plausible_unix(unix_s):
             self._unix_date = float(unix_s)
 
-    def _magnetic_declination(self, uses_mag: bool) -> float:
-        """The declination (deg) for this alignment: ``--declination``, else the World Magnetic
-        Model's at the initial position and the date (docs/conventions.md "Magnetic field")."""
+    def _magnetic_field(self, uses_mag: bool) -> tuple[float, tuple[float, float]]:
+        """The declination (deg) for this alignment, ``--declination`` else the World Magnetic Model's at
+        the initial position and the date, and the model's inclination (deg) and strength (gauss) for the
+        disturbance checks (docs/conventions.md "Magnetic field")."""
         if self.cfg.mag_year is not None:
             year, when = float(self.cfg.mag_year), "the given date"
         elif self._unix_date is not None:
@@ -163,16 +162,14 @@ class Engine:
             year, when = magmodel.this_year(), "today's date (the stream gave none)"
         lat, lon, alt = self._pos  # type: ignore[misc]
         f = magmodel.field_at(lat, lon, alt, year)
-        # the field for the disturbance checks (gauss: 1 G = 1e5 nT), whatever gives the declination
-        self.filter.settings = dataclasses.replace(self.filter.settings,
-                                                   mag_model=(f.inclination, f.intensity * 1e-5))
+        model = (f.inclination, f.intensity * 1e-5)  # gauss: 1 G = 1e5 nT; whatever gives the declination
         if self.cfg.declination is not None:
-            return float(self.cfg.declination)
+            return float(self.cfg.declination), model
         if uses_mag:
             self._event("INFO", f"magnetic declination {f.declination:.2f} deg (inclination {f.inclination:.1f} deg, "
                                 f"{f.intensity / 1000.0:.1f} uT) from {f.model} at the initial position for {year:.2f}, "
                                 f"{when}" + (" (outside the model's years: extrapolated)" if f.extrapolated else ""))
-        return f.declination
+        return f.declination, model
 
     def on_gnss_yaw(self, t: float | None, yaw: float, sigma: float) -> None:
         """A dual-antenna GNSS heading (rad, of the antenna baseline; 1-sigma rad) stamped t on the IMU
@@ -274,9 +271,9 @@ class Engine:
         w_mean, f_mean, m_mean = data[:, 0:3].mean(0), data[:, 3:6].mean(0), data[:, 6:9].mean(0)
         roll, pitch = align.level(f_mean)
         has_mag = bool(np.all(np.isfinite(m_mean)) and np.linalg.norm(m_mean) > 0)
-        self.declination = self._magnetic_declination(has_mag and (
+        self.declination, model = self._magnetic_field(has_mag and (
             "mag" in self.cfg.filter.aiding or self.cfg.heading in ("mag", "auto")))
-        self.filter.settings = dataclasses.replace(self.filter.settings, declination=self.declination)
+        self.filter.settings = dataclasses.replace(self.filter.settings, declination=self.declination, mag_model=model)
         yaw, source = self._heading(w_mean, m_mean, roll, pitch)
         lat, lon, alt = self._pos  # type: ignore[misc]
         self._s = sd.init_state(smp.t, math.radians(lat), math.radians(lon), alt, np.zeros(3), roll, pitch, yaw)

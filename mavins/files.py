@@ -759,18 +759,21 @@ class SolutionWriter:
         self._fh = open(self.path, "w", encoding="utf-8", newline="")
         self._fh.write(",".join(columns) + "\n")
         self._width = len(columns)
+        self._to_file_units = None
+        if self._width != len(SOLUTION_COLUMNS):
+            from .core.aided import to_file_units
+
+            self._to_file_units = to_file_units
         self.rows = 0
 
     def write(self, row: np.ndarray) -> None:
         if row.shape[0] != self._width:
             raise ValueError(f"a row of {row.shape[0]} values for {self._width} columns")
-        if self._width == len(SOLUTION_COLUMNS):
+        if self._to_file_units is None:
             r = row.copy()
             r[[1, 2, 7, 8, 9]] = np.degrees(r[[1, 2, 7, 8, 9]])
         else:
-            from .core.aided import to_file_units
-
-            r = to_file_units(row[None, :])[0]
+            r = self._to_file_units(row[None, :])[0]
         self._fh.write(",".join(map(repr, r.tolist())) + "\n")
         self.rows += 1
 

@@ -28,6 +28,8 @@ AIDING_KINDS = ("gnss", "baro", "mag", "zupt")
 ABS_TIMEOUT_S = 5.0  # s of sensor time after the last accepted fix during which position counts as absolute
 GNSS_LOST_S = 3.0  # s without an accepted fix after which GNSS is reported lost
 JUMP_M = 1.0  # m: an accepted position correction above this is a discontinuity (reset_counter)
+GNSS_HEADING = "GNSS yaw"  # heading source: a dual-antenna receiver's heading (GPS_RAW_INT yaw)
+GNSS_YAW_PENDING = "GNSS velocity (pending)"  # heading source: none yet, found from GNSS velocity once moving
 MAG_INCL_GATE_DEG = 20.0  # deg: a sample whose inclination differs more from the model's is disturbed (EKF2_MAG_CHK_INC)
 MAG_STRENGTH_GATE = 0.2  # gauss: likewise for its strength (PX4 EKF2_MAG_CHK_STR)
 
@@ -149,9 +151,9 @@ class LiveFilter:
             return min(1.0, self.settings.sigma_yaw)  # an autopilot EKF heading: about 1 deg
         if source == "magnetometer":
             return min(5.0, self.settings.sigma_yaw)
-        if source == "GNSS yaw":  # engine.GNSS_HEADING: a dual-antenna receiver, about 1 deg
+        if source == GNSS_HEADING:  # a dual-antenna receiver: about 1 deg
             return min(2.0, self.settings.sigma_yaw)
-        if source == "GNSS velocity (pending)":  # engine.GNSS_YAW_PENDING: any heading, uniform on the circle
+        if source == GNSS_YAW_PENDING:  # any heading, uniform on the circle
             return 180.0 / math.sqrt(3.0)
         if source == "gyrocompass":
             horiz = earth.OMEGA * max(math.cos(lat), 1e-3)
@@ -329,7 +331,7 @@ def warm_measurements() -> None:
                        ("gnss", (math.radians(45.0), math.radians(7.0), 100.0, (0.0, 0.0, math.nan), 1.0, 2.0, 0.3)),
                        ("baro", (100.0, 0.5)), ("mag", ((0.2, 0.0, 0.4),)), ("gnss_yaw", (0.1, 0.02))):
         f.measure(s, cfg, 0.0, kind, *args)
-    # the heading from GNSS velocity (engine.GNSS_YAW_PENDING): the yaw bank and the reset
+    # the heading from GNSS velocity (GNSS_YAW_PENDING): the yaw bank and the reset
     from .core import yawgsf
 
     X, P, logw = yawgsf.make(0.0, 0.0)

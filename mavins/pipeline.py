@@ -228,7 +228,7 @@ def gnss_fix(msg: object, geoid_height: float) -> tuple[float | None, float, flo
     return t, m.lat * 1e-7, m.lon * 1e-7, h, vel, sig_h, sig_v, sig_vel  # type: ignore[attr-defined]
 
 
-UINT16_UNKNOWN = 65535  # GPS_RAW_INT / GPS2_RAW vel and cog: "If unknown, set to: UINT16_MAX"
+UINT16_UNKNOWN = 65535  # GPS_RAW_INT / GPS2_RAW eph, epv, vel, cog: "If unknown, set to: UINT16_MAX"
 
 
 def ground_velocity(vel_cm_s: int, cog_cdeg: int) -> tuple[float, float, float] | None:

@@ -38,8 +38,9 @@ from .engine import EngineConfig
 from .files import FOUND, DataFileError, SolutionWriter, sniff
 from .imuset import DISCOVERY_S
 from .link.ingest import HIGHRES_ACC_GYRO, HIGHRES_MAG, IMU_MESSAGES, IngestConfig
+from .link import publish
 from .link.mavlink import mavlink
-from .pipeline import GNSS_MESSAGES, Pipeline
+from .pipeline import GNSS_MESSAGES, UINT16_UNKNOWN, Pipeline
 from .progress import Progress
 
 DF_HEAD = b"\xa3\x95"
@@ -191,7 +192,6 @@ def _highres(enc: mavlink.MAVLink, dec: mavlink.MAVLink, t_us: int, acc: tuple, 
 # -- aiding records as MAVLink messages ---------------------------------------------------------
 
 PACK_ERRORS = (ValueError, OverflowError, TypeError, struct.error)  # a value a message field cannot hold
-UINT16_UNKNOWN = 65535  # GPS_RAW_INT eph/epv/vel/cog: "If unknown, set to: UINT16_MAX"
 
 
 def _int(v: float, lo: int, hi: int, unknown: int | None = None) -> int:
@@ -251,8 +251,7 @@ def scaled_pressure(enc: mavlink.MAVLink, dec: mavlink.MAVLink, t_us: int, press
 def system_time(enc: mavlink.MAVLink, dec: mavlink.MAVLink, t_us: int, unix_us: int) -> mavlink.MAVLink_message:
     """A SYSTEM_TIME of the UTC time ``unix_us`` (us since the UNIX epoch, from the log's GPS) at
     ``t_us`` on the IMU clock (MAVLink common.xml SYSTEM_TIME: time_unix_usec, time_boot_ms uint32 ms)."""
-    m = enc.system_time_encode(_int(unix_us, 1, 2**64 - 1), _int(t_us, 0, 2**64 - 1) // 1000 % 2**32)
-    return _frame(enc, dec, m)
+    return _frame(enc, dec, publish.system_time(enc, _int(unix_us, 1, 2**64 - 1), _int(t_us, 0, 2**64 - 1) * 1e-6))
 
 
 def _col(d: dict, name: str, i: int, default: float = math.nan) -> float:
