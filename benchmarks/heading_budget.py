@@ -53,6 +53,7 @@ from sim.aiding import MagConfig
 from mavins.core import earth
 from mavins.core import errmodel as em
 from mavins.core import kalman as kf
+from mavins.core import strapdown as sd
 from mavins.core.rotation import quat_to_dcm, skew
 
 TIMES = (35.0, 42.0, 46.0, 60.0, 70.0, 76.0, 90.0, 110.0)
@@ -87,7 +88,7 @@ def budget(spec: em.ImuSpec, setup: str, sigma_vel: float, mag_rate: float = 0.0
     sp = spec.as_array()
     s = t.INIT_SIGMA
     P = kf.initial_covariance(sp, s["sigma_pos"], s["sigma_vel"], math.radians(s["sigma_level"]),
-                              math.radians(s["sigma_yaw"]), 50.0)
+                              math.radians(s["sigma_yaw"]), 50.0, 0.0)
     rest_end = t.STATIC[0][1]
     g = t.GNSS
     r_pos = np.diag([g.sigma_h ** 2, g.sigma_h ** 2, g.sigma_v ** 2])
@@ -126,8 +127,11 @@ def budget(spec: em.ImuSpec, setup: str, sigma_vel: float, mag_rate: float = 0.0
             kf.update(x, P, h_pos, zero3, r_pos, 0.0, kf.ALL)
             kf.update(x, P, h_vel, zero3, np.eye(3) * sigma_vel ** 2, 0.0, kf.ALL)
         if mag_rate > 0.0 and tk >= 1.0 - 1e-9 and abs(tk * mag_rate - round(tk * mag_rate)) < 1e-6:
-            _, h_mag, _ = kf.mag_heading(mag.field_n(), math.radians(mag.declination),
-                                         math.tan(math.radians(mag.inclination)), sig_mag)
+            f_n = mag.field_n()
+            s_nav = np.zeros(sd.S_C + 9)  # mag_heading reads the attitude only
+            s_nav[sd.S_C:sd.S_C + 9] = c.ravel()
+            _, h_mag, _ = kf.mag_heading(s_nav, f_n, math.radians(mag.declination),
+                                         math.tan(math.radians(mag.inclination)), math.hypot(f_n[0], f_n[1]), sig_mag)
             kf.update(x, P, h_mag, np.zeros(1), r_mag, 0.0, kf.ALL)
         bz = P[em.X_BG + 2, em.X_BG + 2] + P[em.X_GG + 2, em.X_GG + 2] + 2.0 * P[em.X_BG + 2, em.X_GG + 2]
         out.append((tk, math.degrees(math.sqrt(P[em.X_PHI + 2, em.X_PHI + 2])), math.degrees(math.sqrt(bz))))

@@ -159,6 +159,9 @@ def _add_nav(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--mag", type=Path, metavar="MAG.csv",
                    help="calibrated magnetometer, body FRD, any unit: t,mx,my,mz [,sigma] (sigma: heading noise of "
                         "one sample, deg, default 3)")
+    g.add_argument("--mag-unit", choices=("gauss", "mgauss", "uT", "nT"),
+                   help="MAG.csv's unit (mavins sim writes uT): the magnetic model's strength then checks the "
+                        "samples and sets the hard iron's model (--mag-bias); default: any unit, not checked")
     _magnetic_options(g, "today's")
     g.add_argument("--rest", type=_Outage(), action="append", metavar="START,END",
                    help="the vehicle stood still over this interval of sensor time (s): a zero-velocity update at "
@@ -206,6 +209,13 @@ def _filter_options(g: argparse._ArgumentGroup, with_aiding: bool = True) -> Non
                    help="reject a measurement whose normalised innovation exceeds N sigma")
     g.add_argument("--lever-arm", type=_Vec3(), default="0,0,0", metavar="X,Y,Z",
                    help="GNSS antenna position from the IMU, body frame FRD (m)")
+    g.add_argument("--scale-factors", action="store_true",
+                   help="estimate the gyro and accelerometer scale factors too, from the grade's figures or the "
+                        "spec's gyro_scale/accel_scale (ppm); written as sg_*, sa_* columns (docs/filter.md)")
+    g.add_argument("--mag-bias", type=_real(0.0, 1e6), default=0.0, metavar="SIGMA",
+                   help="estimate the magnetometer's hard iron (body FRD) from this initial 1-sigma per axis: gauss "
+                        "for run/replay (as MAVLink carries the field), MAG.csv's unit for nav (default 0: the samples "
+                        "are calibrated, as autopilots send them)")
     for kind, what in DELAYED:
         g.add_argument(f"--{kind}-delay", type=_real(0.0, 1000.0), default=0.0, metavar="MS",
                        help=f"the {what} stamped t was measured MS ms earlier, at t - MS/1000, and is fused at that "
@@ -293,6 +303,26 @@ class _Outage:
         return a, b
 
 
+class _Disturbance:
+    """START,END,N,E,D: an interval of sensor time (s) and a field (gauss, NED)."""
+
+    def describe(self, metavar: str | None = None) -> str:
+        return "START,END,N,E,D with 0 <= START < END (s) and a field in gauss"
+
+    def __call__(self, text: str) -> tuple[float, ...]:
+        import math
+
+        try:
+            v = tuple(float(x) for x in text.split(","))
+        except ValueError:
+            v = ()
+        if len(v) != 5 or not all(math.isfinite(x) for x in v) or not 0.0 <= v[0] < v[1] \
+                or max(abs(x) for x in v[2:]) > 10.0:
+            raise argparse.ArgumentTypeError(f"expected START,END,N,E,D with 0 <= START < END (s) and a field of "
+                                             f"at most 10 gauss per axis, got {text!r}")
+        return v
+
+
 class _Date:
     """``--date``: a UTC date YYYY-MM-DD or a decimal year, 1900..2100, returned as a decimal year."""
 
@@ -373,7 +403,8 @@ def _cmd_nav(args: argparse.Namespace) -> int:
 
             rows, counts = run_nav_aided(args.imu[0], args.init, args.output, opts,
                                          AidingFiles(args.gnss, args.baro, args.mag, args.declination,
-                                                     tuple(args.rest or ()), args.date, _delays(args)),
+                                                     tuple(args.rest or ()), args.date, _delays(args),
+                                                     args.mag_bias, args.scale_factors, args.mag_unit),
                                          _imu_spec(args), args.lever_arm, args.gate)
             for kind, (ok, bad) in counts.items():
                 if ok or bad:
@@ -482,6 +513,11 @@ def _add_sim(sub: argparse._SubParsersAction) -> None:
                         "the World Magnetic Model's field at the start on --date, 0.3 uT noise; docs/simulator.md)")
     p.add_argument("--date", type=_Date(), default=None, metavar="YYYY-MM-DD",
                    help="the date of the simulated magnetic field (or a decimal year); default: today's")
+    p.add_argument("--mag-hard-iron", type=_Vec3(), default="0,0,0", metavar="X,Y,Z",
+                   help="the simulated magnetometer's hard iron, body FRD (gauss; 1 gauss = 100 uT)")
+    p.add_argument("--mag-disturbance", type=_Disturbance(), action="append", metavar="START,END,N,E,D",
+                   help="a local field (gauss, NED: steel, a power line) added to the Earth's between these sensor "
+                        "times (s); repeatable")
     p.add_argument("--imus", type=_positive_int(1, 3), default=1, metavar="N",
                    help="IMUs (1..3): extras written as imu1.csv, imu2.csv, streamed as HIGHRES_IMU id 1, 2 "
                         "(with --msg raw as SCALED_IMU2/3); scenario [[faults]] name them (docs/redundancy.md)")
@@ -546,7 +582,10 @@ def _sim_mag(mag_config: type, run: object, args: argparse.Namespace) -> object:
 
     init = run.init()  # type: ignore[attr-defined]
     year = args.date if args.date is not None else this_year()
-    return mag_config.at(init.lat, init.lon, init.h, year, rate=args.mag_rate or 10.0)
+    uT = 100.0  # per gauss
+    return mag_config.at(init.lat, init.lon, init.h, year, rate=args.mag_rate or 10.0,
+                         hard_iron=tuple(uT * v for v in args.mag_hard_iron),
+                         disturbances=tuple((d[0], d[1], tuple(uT * v for v in d[2:])) for d in args.mag_disturbance or ()))
 
 
 def _scenario_error(name: str, exc: Exception) -> str:
@@ -679,7 +718,7 @@ def _engine_config(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     from .livefilter import FilterSettings
 
     flt = FilterSettings(spec=_imu_spec(args), aiding=args.aiding, gate=args.gate, lever_arm=args.lever_arm,
-                         delays=_delays(args))
+                         delays=_delays(args), sigma_mag_bias=args.mag_bias, scale_factors=args.scale_factors)
     from .core.settings import strapdown_from_options
 
     strapdown = strapdown_from_options(args)

@@ -750,8 +750,8 @@ def read_solution(path: str | Path) -> np.ndarray:
 
 class SolutionWriter:
     """Write solution rows (kernel units) to a solution CSV as they come: the 14 solution columns,
-    or with ``columns`` (the filter's 35, core.aided.OUT_COLUMNS) those, in file units
-    (core.aided.to_file_units)."""
+    or with ``columns`` (the filter's, core.aided.ROW_COLUMNS) those, in file units
+    (core.aided.unit_factors)."""
 
     def __init__(self, path: str | Path, columns: tuple[str, ...] = SOLUTION_COLUMNS) -> None:
         self.path = Path(path)
@@ -759,21 +759,21 @@ class SolutionWriter:
         self._fh = open(self.path, "w", encoding="utf-8", newline="")
         self._fh.write(",".join(columns) + "\n")
         self._width = len(columns)
-        self._to_file_units = None
+        self._factors = None
         if self._width != len(SOLUTION_COLUMNS):
-            from .core.aided import to_file_units
+            from .core.aided import unit_factors
 
-            self._to_file_units = to_file_units
+            self._factors = unit_factors(columns)
         self.rows = 0
 
     def write(self, row: np.ndarray) -> None:
         if row.shape[0] != self._width:
             raise ValueError(f"a row of {row.shape[0]} values for {self._width} columns")
-        if self._to_file_units is None:
+        if self._factors is None:
             r = row.copy()
             r[[1, 2, 7, 8, 9]] = np.degrees(r[[1, 2, 7, 8, 9]])
         else:
-            r = self._to_file_units(row[None, :])[0]
+            r = row * self._factors
         self._fh.write(",".join(map(repr, r.tolist())) + "\n")
         self.rows += 1
 

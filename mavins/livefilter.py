@@ -30,8 +30,6 @@ GNSS_LOST_S = 3.0  # s without an accepted fix after which GNSS is reported lost
 JUMP_M = 1.0  # m: an accepted position correction above this is a discontinuity (reset_counter)
 GNSS_HEADING = "GNSS yaw"  # heading source: a dual-antenna receiver's heading (GPS_RAW_INT yaw)
 GNSS_YAW_PENDING = "GNSS velocity (pending)"  # heading source: none yet, found from GNSS velocity once moving
-MAG_INCL_GATE_DEG = 20.0  # deg: a sample whose inclination differs more from the model's is disturbed (EKF2_MAG_CHK_INC)
-MAG_STRENGTH_GATE = 0.2  # gauss: likewise for its strength (PX4 EKF2_MAG_CHK_STR)
 
 
 @dataclass
@@ -50,6 +48,8 @@ class FilterSettings:
     sigma_yaw: float = 10.0  # deg
     sigma_baro_offset: float = 50.0  # m
     sigma_mag: float = 3.0  # deg of heading
+    scale_factors: bool = False  # estimate the gyro and accelerometer scale factors (errmodel.spec_of)
+    sigma_mag_bias: float = 0.0  # gauss per axis: initial 1-sigma of the hard iron (0: taken as calibrated, not estimated)
     sigma_zupt: float = 0.02  # m/s
     predict_dt: float = 0.01  # s: the covariance is propagated at about this interval
     delays: dict[str, float] = field(default_factory=dict)  # s by kind (gnss, baro, mag): measured this long before its stamp
@@ -73,11 +73,11 @@ class LiveFilter:
         for k in self.settings.aiding:
             if k not in AIDING_KINDS:
                 raise ValueError(f"aiding kinds are {', '.join(AIDING_KINDS)} (or none), got {k!r}")
-        self.spec = errmodel.make_spec(self.settings.spec)
+        self.spec = errmodel.make_spec(self.settings.spec, scale_factors=self.settings.scale_factors)
         self.lever = np.asarray(self.settings.lever_arm, dtype=float).reshape(3)
         self.P = np.zeros((errmodel.NX, errmodel.NX))
         self.bias = np.zeros(kalman.B_SIZE)
-        self.acc = np.zeros(13)
+        self.acc = np.zeros(aided.ACC_SIZE)
         self.sums = np.zeros(7)
         self.predict_every = 1
         self._pending: list[tuple[float, str, tuple]] = []
@@ -90,7 +90,7 @@ class LiveFilter:
         self._w_ib = (0.0, 0.0, 0.0)  # body rate (rad/s) at the last attitude update, bias removed
         self._t_prev_k = 0.0
         self._T_k = 0.0  # s: the last attitude interval (velocity fixes are interpolated over it)
-        self._incl = np.zeros(2)  # sum and count of tan(inclination) of the accepted magnetometer samples
+        self._incl = np.zeros(kalman.MAG_STATS)  # running sums over the accepted magnetometer samples
         self.free = kalman.ALL  # the states an update may correct (kalman.update); the engine holds the heading back
         self._bind(sd.GEOGRAPHIC)
 
@@ -111,7 +111,8 @@ class LiveFilter:
         st = self.settings
         sigma_yaw = math.radians(self.yaw_sigma_deg(heading_source, lat))
         self.P = kalman.initial_covariance(self.spec, sigma_pos or st.sigma_pos, st.sigma_vel,
-                                           math.radians(self.level_sigma_deg()), sigma_yaw, st.sigma_baro_offset)
+                                           math.radians(self.level_sigma_deg()), sigma_yaw, st.sigma_baro_offset,
+                                           st.sigma_mag_bias)
         if bias_window_s > 0.0:
             # the window mean's white-noise part ARW / sqrt(T), and the Earth rate misattributed
             # through the heading error (Omega sigma_yaw); the Gauss-Markov part keeps its own state
@@ -129,6 +130,7 @@ class LiveFilter:
         self._t_prev_k = sd.state_time(s)
         self._T_k = 0.0
         self._incl[:] = 0.0
+        self._incl[4] = self.P[errmodel.X_MB, errmodel.X_MB]  # the hard iron's reset (aided.apply_mag)
         samples = int(cfg[sd.CFG_SAMPLES])
         self.predict_every = max(1, int(round(st.predict_dt / max(dt_sample * samples, 1e-6))))
         self._bind(sd.kernel_frame(cfg))
@@ -185,11 +187,11 @@ class LiveFilter:
         return self.bias[kalman.B_BG:kalman.B_BG + 3] + self.bias[kalman.B_GG:kalman.B_GG + 3]
 
     def body_rate(self, w: tuple) -> tuple[float, float, float]:
-        """A raw gyro reading (rad/s, body) minus the gyro bias estimate, as floats: the same
-        arithmetic as ``w - gyro_bias`` without building arrays (once per attitude update)."""
+        """A raw gyro reading (rad/s, body) corrected by the estimates as floats: the arithmetic of
+        kalman.correct_gyro, ``(w - b) / (1 + s)``, without building arrays (once per attitude update)."""
         b = self.bias.tolist()
-        g, m = kalman.B_BG, kalman.B_GG
-        return (w[0] - (b[g] + b[m]), w[1] - (b[g + 1] + b[m + 1]), w[2] - (b[g + 2] + b[m + 2]))
+        g, m, k = kalman.B_BG, kalman.B_GG, kalman.B_SG
+        return tuple((w[i] - (b[g + i] + b[m + i]) * 1.0) / (1.0 + b[k + i]) for i in range(3))  # type: ignore[return-value]
 
     @property
     def accel_bias(self) -> np.ndarray:
@@ -248,33 +250,22 @@ class LiveFilter:
                 self.last_hgt_t = t_m
         elif kind == "mag":
             (m_b,) = args
-            m_n = kalman.mag_level(s, cfg, np.asarray(m_b, dtype=float), np.array(self._w_ib), late)
-            if self._disturbed(m_n):
-                return
-            if self._update(s, cfg, "mag", ("mag",), kalman.mag_heading(
-                    m_n, math.radians(self.settings.declination), kalman.mag_inclination(self._incl, m_n),
-                    math.radians(self.settings.sigma_mag))):
-                kalman.mag_accept(self._incl, m_n)
+            model = self.settings.mag_model
+            incl, strength = (math.nan, math.nan) if model is None else (math.radians(model[0]), model[1])
+            status, _, ratio = aided.apply_mag(
+                s, cfg, self.bias, self.P, self._incl, np.asarray(m_b, dtype=float), np.array(self._w_ib), late,
+                math.radians(self.settings.declination), math.radians(self.settings.sigma_mag), incl, strength,
+                aided.MAG_STRENGTH_GATE, self.settings.gate, self.free)
+            if status < 0:  # a motor, steel, a power cable: the field is not the Earth's (aided.apply_mag)
+                self.counters["mag_disturbed"] += 1
+            else:
+                self.counters[f"mag_{'accepted' if status == 1 else 'rejected'}"] += 1
+                self.ratios["mag"] = ratio * ratio
         elif kind == "gnss_yaw":  # the heading of a dual-antenna receiver, the vehicle's (rad, 1-sigma rad)
             yaw, sigma = args
             self._update(s, cfg, "gnss_yaw", ("mag",), kalman.heading(s, yaw, sigma))
         elif kind == "zupt":
             self._update(s, cfg, "zupt", ("vel",), kalman.zupt(s, self.settings.sigma_zupt))
-
-    def _disturbed(self, m_n: np.ndarray) -> bool:
-        """Whether a levelled magnetometer sample (NED, gauss) disagrees with the Earth's field the model
-        gives (settings.mag_model): inclination ``atan2(m_D, |m_h|)`` off by more than MAG_INCL_GATE_DEG
-        or strength by more than MAG_STRENGTH_GATE (PX4 EKF2's magnetometer checks). Counted
-        ``mag_disturbed`` (a motor, steel, a power cable), never applied."""
-        model = self.settings.mag_model
-        if model is None:
-            return False
-        incl = math.degrees(math.atan2(m_n[2], math.hypot(m_n[0], m_n[1])))
-        strength = math.sqrt(m_n[0] ** 2 + m_n[1] ** 2 + m_n[2] ** 2)
-        if abs(incl - model[0]) <= MAG_INCL_GATE_DEG and abs(strength - model[1]) <= MAG_STRENGTH_GATE:
-            return False
-        self.counters["mag_disturbed"] += 1
-        return True
 
     def _update(self, s: np.ndarray, cfg: np.ndarray, kind: str, ratio_keys: tuple[str, ...],
                 model: tuple[np.ndarray, np.ndarray, np.ndarray]) -> bool:
@@ -295,9 +286,10 @@ class LiveFilter:
 
     # -- what is published ------------------------------------------------------------
     def output_row(self, row: np.ndarray) -> np.ndarray:
-        """A solution row (kernel units) extended by the filter's 21 columns (core.aided.FILTER_COLUMNS:
-        1-sigma, bias estimates and their 1-sigma, kernel units), as ``mavins nav`` writes them."""
-        out = np.zeros(aided.OUT_SIZE)
+        """A solution row (kernel units) extended by the filter's columns (core.aided.ROW_COLUMNS:
+        1-sigma, bias, scale-factor and hard-iron estimates and their 1-sigma, kernel units), as
+        ``mavins nav`` computes them (aided.file_columns picks a file's)."""
+        out = np.zeros(aided.ROW_SIZE)
         out[:sd.OUT_SIZE] = row
         aided.filter_row(self.P, self.bias, out)
         return out

@@ -128,6 +128,9 @@ MAG_REQUIRED = ("t", "mx", "my", "mz")
 MAG_OPTIONAL = ("sigma",)
 
 
+MAG_UNITS = {"gauss": 1e-5, "mgauss": 1e-2, "uT": 1e-3, "nT": 1.0}  # per nT, the magnetic model's unit
+
+
 @dataclass(frozen=True)
 class AidingFiles:
     """The aiding inputs of ``mavins nav``: files (None = not given), the magnetic declination (deg, east
@@ -141,15 +144,27 @@ class AidingFiles:
     rest: tuple[tuple[float, float], ...] = ()
     year: float | None = None
     delays: dict[str, float] = field(default_factory=dict)  # s by kind (gnss, baro, mag): measured before the t column
+    mag_bias: float = 0.0  # initial 1-sigma of the magnetometer's hard iron (the file's unit); 0: not estimated
+    scale_factors: bool = False  # estimate the grade's (or the spec's) gyro and accelerometer scale factors
+    mag_unit: str | None = None  # the magnetometer file's unit (MAG_UNITS), None: not known
 
-    def declination_at(self, lat_deg: float, lon_deg: float, h_m: float) -> float:
-        """The declination (deg) to use at the initial position: the given one, else the model's."""
+    def field_at(self, lat_deg: float, lon_deg: float, h_m: float) -> dict[str, float | None]:
+        """navigate_aided's magnetic keywords at the initial position: the declination (deg), the given one
+        else the model's; the model's inclination (deg) and, with ``mag_unit``, its strength and the strength
+        check in that unit. No model figures with a given declination: a file's field is the user's to state
+        (it may be synthetic), where the live path's is the Earth's (docs/filter.md)."""
         if self.declination is not None:
-            return float(self.declination)
+            return {"declination": float(self.declination)}
         from .core import magmodel
 
         year = self.year if self.year is not None else magmodel.this_year()
-        return magmodel.field_at(lat_deg, lon_deg, h_m, year).declination
+        f = magmodel.field_at(lat_deg, lon_deg, h_m, year)
+        out: dict[str, float | None] = {"declination": f.declination, "mag_inclination": f.inclination}
+        if self.mag_unit is not None:
+            per_nt = MAG_UNITS[self.mag_unit]
+            out["mag_strength"] = f.intensity * per_nt
+            out["mag_strength_gate"] = 0.2e5 * per_nt  # PX4's 0.2 gauss (aided.MAG_STRENGTH_GATE)
+        return out
 
 
 def rest_windows(rest: tuple[tuple[float, float], ...]) -> np.ndarray | None:
@@ -281,16 +296,21 @@ def run_nav_aided(imu_path: Path, init_path: Path, out_path: Path, opts: NavOpti
         raise files.DataFileError(f"{aiding.mag}: line {row + 2}, column 'sigma': must be positive (deg of "
                                   f"heading), got {float(mag[row, 4])!r}")
     t_read = time.perf_counter() - t_start
+    field = aiding.field_at(init.lat, init.lon, init.h) if mag is not None else {"declination": 0.0}
+    if opts.strapdown.earth_model == "none":  # a laboratory has no Earth field to check against
+        field = {"declination": field["declination"]}
     try:
         rows, stats = aided.navigate_aided(
             imu, init_keys, gnss, baro, mag=mag, static=static, spec=spec, lever_arm=lever_arm, gate=gate,
-            declination=aiding.declination_at(init.lat, init.lon, init.h) if mag is not None else 0.0,
+            mag_bias=aiding.mag_bias, **field,
+            scale_factors=aiding.scale_factors,
             **{k: v for k, v in opts.strapdown.keywords().items() if k != "imu_rates"})
     except ValueError as exc:
         raise files.DataFileError(str(exc)) from None
     t_compute = time.perf_counter() - t_start - t_read
     with files.atomic_output(out_path) as tmp:
-        files.write_table(tmp, aided.OUT_COLUMNS, rows)
+        keep = aided.file_columns(aided.em.make_spec(spec, scale_factors=aiding.scale_factors), aiding.mag_bias)
+        files.write_table(tmp, tuple(aided.ROW_COLUMNS[i] for i in keep), rows[:, keep])
     t_write = time.perf_counter() - t_start - t_read - t_compute
     if opts.timing:
         t_sd = _strapdown_seconds(imu, init_keys, opts)

@@ -8,6 +8,8 @@ it looks at the wall clock, so live and replayed input give identical output.
 
 from __future__ import annotations
 
+import functools
+
 import logging
 import math
 from collections import Counter
@@ -65,12 +67,22 @@ class Pipeline:
     @property
     def columns(self) -> tuple[str, ...]:
         """A solution file's columns (docs/conventions.md): the 14 solution columns, and the filter's
-        sigma and bias columns after them whenever it aids (as ``mavins nav`` writes them)."""
-        return aided.OUT_COLUMNS if self.engine_cfg.filter.aiding else sd.OUT_COLUMNS
+        sigma and bias columns after them whenever it aids, with the scale-factor and hard-iron columns
+        of the states it estimates (as ``mavins nav`` writes them, core.aided.file_columns)."""
+        if not self.engine_cfg.filter.aiding:
+            return sd.OUT_COLUMNS
+        return tuple(aided.ROW_COLUMNS[i] for i in self._file_columns)
+
+    @functools.cached_property
+    def _file_columns(self) -> np.ndarray:
+        f = self.engine.filter
+        return aided.file_columns(f.spec, f.settings.sigma_mag_bias)
 
     def file_row(self, out: Solution) -> np.ndarray:
         """The row of ``columns`` for an output set (kernel units), the filter's state as of it."""
-        return self.engine.filter.output_row(out.row) if self.engine_cfg.filter.aiding else out.row
+        if not self.engine_cfg.filter.aiding:
+            return out.row
+        return self.engine.filter.output_row(out.row)[self._file_columns]
 
     @property
     def vehicle_sysid(self) -> int | None:

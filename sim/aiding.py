@@ -81,7 +81,9 @@ class BaroConfig:
 @dataclass(frozen=True)
 class MagConfig:
     """Magnetometer: rate (Hz), field strength (uT), declination and inclination (deg,
-    east and down positive), noise sigma per axis (uT), hard-iron offset in FRD (uT)."""
+    east and down positive), noise sigma per axis (uT), hard-iron offset in FRD (uT),
+    disturbances ``(t0, t1, (n, e, d))``: a local field (uT, NED: steel, a power line)
+    added to the Earth's from t0 to t1 (s)."""
 
     rate: float = 10.0
     strength: float = 48.0
@@ -89,6 +91,7 @@ class MagConfig:
     inclination: float = 63.0
     sigma: float = 0.3
     hard_iron: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    disturbances: tuple[tuple[float, float, tuple[float, float, float]], ...] = ()
 
     @classmethod
     def at(cls, lat_deg: float, lon_deg: float, h_m: float, year: float, **kw: object) -> "MagConfig":
@@ -217,7 +220,7 @@ def baro(run: "SimRun", config: BaroConfig = BaroConfig()) -> np.ndarray:
 
 
 def magnetometer(run: "SimRun", config: MagConfig = MagConfig()) -> np.ndarray:
-    """Magnetometer rows ``t, mx, my, mz`` (uT, FRD): ``C_n^b m^n + hard iron + noise``."""
+    """Magnetometer rows ``t, mx, my, mz`` (uT, FRD): ``C_n^b (m^n + disturbance) + hard iron + noise``."""
     t = _epochs(run, config.rate)
     _, _, q, _ = truth_at(run, t)
     rng = _rng(run, "mag")
@@ -225,14 +228,18 @@ def magnetometer(run: "SimRun", config: MagConfig = MagConfig()) -> np.ndarray:
     rows = np.empty((t.size, 4))
     rows[:, 0] = t
     for k in range(t.size):
-        rows[k, 1:4] = body_field(q[k], config, noise[k])
+        rows[k, 1:4] = body_field(q[k], config, noise[k], t[k])
     return rows
 
 
-def body_field(q: np.ndarray, config: MagConfig, noise: np.ndarray) -> np.ndarray:
-    """One magnetometer sample (uT, FRD) of an IMU with attitude quaternion ``q`` (C_b^n, scalar first):
-    ``C_n^b m^n + hard iron + noise`` (noise in uT, already drawn)."""
-    return quat_to_dcm(q).T @ config.field_n() + np.asarray(config.hard_iron, dtype=np.float64) + noise
+def body_field(q: np.ndarray, config: MagConfig, noise: np.ndarray, t: float = math.nan) -> np.ndarray:
+    """One magnetometer sample (uT, FRD) at time t (s) of an IMU with attitude quaternion ``q`` (C_b^n,
+    scalar first): ``C_n^b (m^n + disturbances at t) + hard iron + noise`` (noise in uT, already drawn)."""
+    m_n = config.field_n()
+    for t0, t1, extra in config.disturbances:
+        if t0 <= t <= t1:
+            m_n = m_n + np.asarray(extra, dtype=np.float64)
+    return quat_to_dcm(q).T @ m_n + np.asarray(config.hard_iron, dtype=np.float64) + noise
 
 
 def mag_heading(m_b: Sequence[float], roll: float, pitch: float, declination: float) -> float:

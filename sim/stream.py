@@ -120,7 +120,7 @@ def frames(run: SimRun, mav: mavlink.MAVLink, opts: StreamOptions) -> Iterator[t
             gyr = np.clip(np.round(w[i] / opts.raw_gyro_scale), -32768, 32767).astype(int)
             out.append(mav.raw_imu_encode(usec, *acc, *gyr, 0, 0, 0, 0, 0))
         elif send_mag[i]:
-            m_b = body_field(truth[i, 10:14], opts.mag, opts.mag.sigma * mag_rng.standard_normal(3))
+            m_b = body_field(truth[i, 10:14], opts.mag, opts.mag.sigma * mag_rng.standard_normal(3), truth[i, 0])
             out.append(mav.highres_imu_encode(usec, *f[i], *w[i], *(m_b * GAUSS_PER_UT), 0.0, 0.0, 0.0, 20.0,
                                               HIGHRES_ACC_GYRO | HIGHRES_MAG, 0))
         else:

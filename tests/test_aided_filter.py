@@ -180,6 +180,19 @@ def magnetometer_rows(trajectory, seed: int, rate: float = MAG.rate) -> np.ndarr
     return np.column_stack([mag, np.full(mag.shape[0], math.degrees(MAG_SIGMA_YAW))])
 
 
+def epoch_nees(nees: dict, rows: np.ndarray, p_history: np.ndarray, truth_all: np.ndarray):
+    """Append one run's attitude, velocity and position NEES at its kept covariances (every EVERY rows) to
+    ``nees``; returns the run's errors, truth rows and the kept rows' indices."""
+    idx = 2 * (np.arange(rows.shape[0]) + 1)  # row k is the update at sample 2k+1: truth row 2(k+1)
+    err = nav_errors(rows, truth_all[idx])
+    sel = np.arange(p_history.shape[0]) * EVERY + EVERY - 1
+    for k, o in (("att", 0), ("vel", 3), ("pos", 6)):
+        e = err[sel, o : o + 3]
+        pb = p_history[:, o : o + 3, o : o + 3]
+        nees[k].append(np.einsum("ki,kij,kj->k", e, np.linalg.inv(pb), e))
+    return err, idx, sel
+
+
 def run_monte_carlo(trajectory, with_mag: bool) -> dict:
     """N runs: NEES per epoch (1 Hz) per block, errors, final bias NEES and z, NIS logs."""
     truth_all = trajectory.exact.truth
@@ -190,13 +203,7 @@ def run_monte_carlo(trajectory, with_mag: bool) -> dict:
         kw = {"mag": magnetometer_rows(trajectory, 1000 + r), "declination": MAG.declination} if with_mag else {}
         rows, st = aided.navigate_aided(imu, init, gnss, static=STATIC, spec="consumer", file_units=False,
                                         covariance_every=EVERY, **kw)
-        idx = 2 * (np.arange(rows.shape[0]) + 1)  # row k is the update at sample 2k+1: truth row 2(k+1)
-        err = nav_errors(rows, truth_all[idx])
-        sel = np.arange(st["P_history"].shape[0]) * EVERY + EVERY - 1
-        for k, o in (("att", 0), ("vel", 3), ("pos", 6)):
-            e = err[sel, o : o + 3]
-            pb = st["P_history"][:, o : o + 3, o : o + 3]
-            out["nees"][k].append(np.einsum("ki,kij,kj->k", e, np.linalg.inv(pb), e))
+        err, idx, sel = epoch_nees(out["nees"], rows, st["P_history"], truth_all)
         out["err"].append(err)
         out["P_sigma"].append(np.sqrt(np.diagonal(st["P_history"], axis1=1, axis2=2)[:, :9]))
         eb = np.concatenate([rows[-1, 23:26] - bg[idx[-1]], rows[-1, 26:29] - ba[idx[-1]]])
@@ -441,8 +448,9 @@ def test_zupt_zaru_and_magnetometer_at_rest(static_run) -> None:
     assert rows[-1, 31] ** 2 <= g.random_walk**2 / last + walk * last / 3.0 + walk * (rows[-1, 0] - 59.9)
     assert abs(rows[-1, 25] - bg[idx[-1], 2]) < 3.0 * rows[-1, 31]
     assert abs(err[-1, 2]) < 3.0 * rows[-1, 22]
-    m_n = kf.mag_level(st["state"], sd.make_config(), mag[-1, 1:4], np.zeros(3), 0.0)
-    _, H, _ = kf.mag_heading(m_n, math.radians(mag_cfg.declination), kf.mag_tan_inclination(m_n), sig_yaw)
+    m_n = kf.mag_level(st["state"], sd.make_config(), np.zeros(kf.B_SIZE), mag[-1, 1:4], np.zeros(3), 0.0)
+    _, H, _ = kf.mag_heading(st["state"], m_n, math.radians(mag_cfg.declination), kf.mag_tan_inclination(m_n),
+                             math.hypot(m_n[0], m_n[1]), sig_yaw)
     h = H[0, 0:3]
     assert np.hypot(h[0], h[1]) == pytest.approx(math.tan(math.radians(mag_cfg.inclination)), rel=0.02)
     sig_z = math.sqrt(h @ st["P"][0:3, 0:3] @ h)
@@ -504,15 +512,15 @@ def test_run_continues_across_calls(trajectory) -> None:
     def fresh():
         s = sd.init_state(0.0, math.radians(init["lat"]), math.radians(init["lon"]), init["h"],
                           np.array([init["vn"], init["ve"], init["vd"]]), *np.radians([init["roll"], init["pitch"], init["yaw"]]))
-        P = kf.initial_covariance(spec, 3.0, 0.3, math.radians(0.05), math.radians(3.0), 50.0)
+        P = kf.initial_covariance(spec, 3.0, 0.3, math.radians(0.05), math.radians(3.0), 50.0, 0.0)
         return s, P, np.zeros(kf.B_SIZE)
 
     def call(s, P, bias, rows):
-        out = np.empty((rows.stop - rows.start, aided.OUT_SIZE))
-        counts = np.zeros((6, 2), dtype=np.int64)
+        out = np.empty((rows.stop - rows.start, aided.ROW_SIZE))
+        counts = np.zeros((len(aided.KIND_NAMES), 2), dtype=np.int64)
         n, _ = aided.run_aided(s, cfg, np.ascontiguousarray(imu[rows, 0]), np.ascontiguousarray(imu[rows, 1:4]),
                                np.ascontiguousarray(imu[rows, 4:7]), g, np.empty((0, 3)), np.empty((0, 5)), empty,
-                               spec, np.zeros(3), 0.0, 5.0, 1, P, bias, out, counts, np.empty((0, 6)),
+                               spec, np.zeros(3), 0.0, math.nan, math.nan, math.nan, 5.0, 1, P, bias, out, counts, np.empty((0, 6)),
                                np.empty((0, em.NX, em.NX)), 1)
         return out[:n], counts
 
@@ -693,7 +701,8 @@ def test_measurement_models_linearise_the_measurement(which: str) -> None:
         m_b = c_true.T @ m_n
 
         def measure(s):
-            return kf.mag_heading(kf.mag_level(s, CFG, m_b, np.zeros(3), 0.0), 0.05, math.tan(1.1), 0.01)
+            return kf.mag_heading(s, kf.mag_level(s, CFG, np.zeros(kf.B_SIZE), m_b, np.zeros(3), 0.0), 0.05,
+                                  math.tan(1.1), 48.0 * math.cos(1.1), 0.01)
         tol = 2e-5
     else:
         def measure(s):
@@ -765,3 +774,129 @@ def test_file_units() -> None:
                                       "sigma_att_n", "sigma_att_e", "sigma_att_d", "bg_x", "bg_y", "bg_z",
                                       "ba_x", "ba_y", "ba_z", "sigma_bg_x", "sigma_bg_y", "sigma_bg_z",
                                       "sigma_ba_x", "sigma_ba_y", "sigma_ba_z")
+
+
+# --- the sensor-error states: the magnetometer's hard iron and the IMU's scale factors -------------------
+
+N_SENSOR = 20  # runs of each Monte Carlo below (the bands are for N_SENSOR)
+HARD_IRON = 10.0  # uT: 0.1 gauss of hard iron
+HARD_IRON_SIGMA = HARD_IRON / math.sqrt(3.0)  # uT per axis: the filter's prior, 0.1 gauss RMS
+
+
+def run_sensor_monte_carlo(trajectory, *, hard_iron: bool, scale: bool, estimate: bool) -> dict:
+    """N_SENSOR runs of the quiet flight with the consumer grade's stochastic errors and, drawn per run from the
+    filter's prior, a hard iron on the 50 Hz magnetometer (``hard_iron``; 10 uT in a random direction) or gyro
+    and accelerometer
+    scale factors (``scale``; the grade's 3333 and 10000 ppm as 1-sigma). ``estimate``: the filter models them
+    (``mag_bias``, the spec's scale sigmas), else not. Returns the attitude/velocity/position NEES per 1 Hz
+    epoch, the heading's normalised errors after 60 s, and the final NEES and z of the sensor-error states."""
+    truth_all = trajectory.exact.truth
+    spec_true = em.spec_from_grade("consumer", scale_factors=True)
+    out = {"nees": {k: [] for k in ("att", "vel", "pos")}, "yaw_z": [], "state_nees": [], "state_z": [],
+           "state_sigma": [], "yaw_err": []}
+    for r in range(N_SENSOR):
+        seed = 3000 + r
+        rng = np.random.default_rng([seed, 2])
+        model, spec, kw = MODEL, spec_true, {}
+        if scale:
+            sg = rng.standard_normal(3) * spec_true.gyro_scale
+            sa = rng.standard_normal(3) * spec_true.accel_scale
+            model = dataclasses.replace(MODEL, gyro=dataclasses.replace(MODEL.gyro, scale_factor_ppm=tuple(sg * 1e6)),
+                                        accel=dataclasses.replace(MODEL.accel, scale_factor_ppm=tuple(sa * 1e6)))
+            truth_state, block = np.concatenate([sg, sa]), slice(em.X_SG, em.X_SA + 3)
+        if not (scale and estimate):
+            spec = dataclasses.replace(spec_true, gyro_scale=0.0, accel_scale=0.0)
+        ex = trajectory.exact
+        t, dth, dv, _ = errors.apply(model, ex.t, ex.dtheta, ex.dv, seed, t_start=ex.t0)
+        run = dataclasses.replace(trajectory, seed=seed)
+        gnss = aiding.gnss(run, GNSS)
+        init = perturbed_init(ex.init(), np.random.default_rng([seed, 1]))
+        if hard_iron:
+            u = rng.standard_normal(3)
+            hi = u / np.linalg.norm(u) * HARD_IRON  # 0.1 gauss in a random direction: E|hi|^2 = 3 sigma^2
+            mag = aiding.magnetometer(run, dataclasses.replace(MAG, hard_iron=tuple(hi)))
+            kw = {"mag": np.column_stack([mag, np.full(mag.shape[0], math.degrees(MAG_SIGMA_YAW))]),
+                  "declination": MAG.declination, "mag_bias": HARD_IRON_SIGMA if estimate else 0.0,
+                  "mag_inclination": MAG.inclination, "mag_strength": MAG.strength, "mag_strength_gate": 20.0}
+            truth_state, block = hi, slice(em.X_MB, em.X_MB + 3)
+        rows, st = aided.navigate_aided(np.column_stack([t, dth, dv]), init, gnss, static=STATIC, spec=spec,
+                                        file_units=False, covariance_every=EVERY, **kw)
+        err, _, sel = epoch_nees(out["nees"], rows, st["P_history"], truth_all)
+        late = rows[sel, 0] >= 60.0
+        out["yaw_z"].append(err[sel, 2][late] / np.sqrt(st["P_history"][late, 2, 2]))
+        out["yaw_err"].append(err[sel, 2][late])
+        if estimate:
+            e = st["bias"][block.start - em.X_SENSORS : block.stop - em.X_SENSORS] - truth_state
+            pb = st["P"][block, block]
+            out["state_nees"].append(float(e @ np.linalg.solve(pb, e)))
+            out["state_z"].append(e / np.sqrt(np.diag(pb)))
+            out["state_sigma"].append(np.sqrt(np.diag(pb)))
+    return out
+
+
+@pytest.fixture(scope="module")
+def hard_iron_mc(trajectory):
+    return run_sensor_monte_carlo(trajectory, hard_iron=True, scale=False, estimate=True)
+
+
+@pytest.fixture(scope="module")
+def scale_mc(trajectory):
+    return run_sensor_monte_carlo(trajectory, hard_iron=False, scale=True, estimate=True)
+
+
+@pytest.fixture(params=["hard_iron_mc", "scale_mc"])
+def sensor_mc(request):
+    return request.getfixturevalue(request.param)
+
+
+@pytest.mark.parametrize("block", ["pos", "vel", "att"])
+def test_sensor_error_monte_carlo_nees(sensor_mc, block: str) -> None:
+    """With 0.1 gauss of hard iron, or with the consumer grade's scale factors, estimated: the ANEES of each
+    navigation block, averaged over the 1 Hz epochs, in the chi2(3N)/N band (N = 20: 2.0 .. 4.1)."""
+    anees = np.mean(np.array(sensor_mc["nees"][block]), axis=0)
+    lo, hi = band(3, N_SENSOR)
+    assert lo < anees.mean() < hi, (block, anees.mean(), lo, hi)
+
+
+def test_scale_factors_end_inside_their_sigma(scale_mc) -> None:
+    """The six scale factors at the end against the simulator's: each component's normalised error RMS over
+    the runs within 1 / 1.5 .. 1.5 (the bound of test_monte_carlo_normalised_errors)."""
+    rms = np.sqrt(np.mean(np.array(scale_mc["state_z"]) ** 2, axis=0))
+    assert np.all(rms < 1.5) and np.all(rms > 1.0 / 1.5), rms
+    # jointly (6 dof) measured 8.2 against 6: the correlations of the barely observable accelerometer scale
+    # factors with the biases are somewhat over-confident (docs/filter.md); held below 1.5^2 times 6
+    assert np.mean(scale_mc["state_nees"]) < 1.5 ** 2 * 6, np.mean(scale_mc["state_nees"])
+
+
+def test_hard_iron_is_learnt_nearly_inside_its_sigma(hard_iron_mc) -> None:
+    """The hard iron at the end against the simulator's. A hard iron of 0.1 gauss is 46 % of this horizontal
+    field, where the heading is far from linear in it, and the first-order filter is not quite consistent
+    (docs/filter.md "Magnetometer", measured: 19 of 20 runs below the chi2(3) 99.9 % point, normalised-error
+    RMS 1.5, 1.4, 0.8 by axis). Held to: at least 18 of 20 runs below 16.27, and each axis's RMS below 2 (a
+    filter with the hard iron's column wrong by its sign or size, or none, fails both by far)."""
+    assert sum(n < 16.27 for n in hard_iron_mc["state_nees"]) >= N_SENSOR - 2, hard_iron_mc["state_nees"]
+    rms = np.sqrt(np.mean(np.array(hard_iron_mc["state_z"]) ** 2, axis=0))
+    assert np.all(rms < 2.0), rms
+
+
+def test_heading_within_its_sigma_with_hard_iron(hard_iron_mc) -> None:
+    """0.1 gauss of hard iron (about 15 deg of heading on this 22 uT horizontal field, the issue's figure):
+    after 60 s the heading's normalised error RMS over runs and 1 Hz epochs lies within 1 / 1.5 .. 1.5, and the
+    horizontal hard iron is learnt in at least 18 of 20 runs (its final sigma below half the prior's 5.8 uT)."""
+    z = np.concatenate(hard_iron_mc["yaw_z"])
+    assert 1.0 / 1.5 < math.sqrt(np.mean(z ** 2)) < 1.5, math.sqrt(np.mean(z ** 2))
+    learnt = np.all(np.array(hard_iron_mc["state_sigma"])[:, :2] < 0.5 * HARD_IRON_SIGMA, axis=1)
+    assert learnt.sum() >= N_SENSOR - 2, learnt  # a run may end just after a reset (aided.apply_mag)
+
+
+@pytest.mark.parametrize("which", ["hard_iron", "scale"])
+def test_without_the_states_the_filter_is_overconfident(trajectory, which: str) -> None:
+    """The same data with the states left out of the filter: the heading (hard iron) or the attitude (scale
+    factors) is off by several of its sigmas, so the tests above can fail."""
+    mc = run_sensor_monte_carlo(trajectory, hard_iron=which == "hard_iron", scale=which == "scale", estimate=False)
+    if which == "hard_iron":
+        z = np.concatenate(mc["yaw_z"])
+        assert math.sqrt(np.mean(z ** 2)) > 3.0
+    else:
+        anees = np.mean(np.array(mc["nees"]["att"]), axis=0).mean()
+        assert anees > band(3, N_SENSOR)[1], anees

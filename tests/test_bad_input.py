@@ -374,7 +374,8 @@ def _bad_values(kind: object) -> list[str]:
             "_Size": ["10x10", "20000x900", "abc"], "_Seconds": ["0", "-5", "nan", "soon"],
             "_Vec3": ["1,2", "1,2,nan", "1,2,5000", "abc"],
             "_Outage": ["5,1", "-1,2", "nan,3", "abc"],
-            "_Date": ["2025-13-01", "1899", "2100.5", "nan", "soon"]}[name]
+            "_Date": ["2025-13-01", "1899", "2100.5", "nan", "soon"],
+            "_Disturbance": ["5,1,0,0,0.1", "1,2,0,0", "1,2,0,0,nan", "1,2,0,0,11", "abc"]}[name]
 
 
 NUMERIC = _numeric_options()

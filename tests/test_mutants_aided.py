@@ -78,7 +78,7 @@ def test_gnss_position_and_baro_by_hand() -> None:
             [0.05, LAT0 + dlat, LON0 + dlon, H0 + 1.5, NAN, NAN, NAN, 2.0, 2.0, 0.3]]
     baro = [[0.08, H0 + 0.75 + 4.0, 1.0]]
     rows, st = nav(gnss=gnss, baro=baro, init=init(sigma_pos=2.0), baro_offset_sigma=1.0)
-    assert rows.shape == (N_ROWS, aided.OUT_SIZE)
+    assert rows.shape == (N_ROWS, aided.ROW_SIZE)
     np.testing.assert_allclose(rows[:, 0], np.arange(1, 11) * DT, rtol=0, atol=1e-15)
     before, after = rows[:4], rows[4:]
     np.testing.assert_allclose(before[:, 1:4], [[LAT0, LON0, H0]] * 4, rtol=0, atol=1e-12)
@@ -92,7 +92,7 @@ def test_gnss_position_and_baro_by_hand() -> None:
                                atol=0)
     np.testing.assert_array_equal(rows[:, col("sigma_vn")], 0.0)
     assert st["counts"] == {"gnss_pos": (1, 0), "gnss_vel": (0, 0), "baro": (1, 0), "mag": (0, 0), "zupt": (0, 0),
-                            "zaru": (0, 0)}
+                            "zaru": (0, 0), "mag_disturbed": (0, 0)}
     log = st["nis"]
     assert log.shape == (2, 6)
     np.testing.assert_allclose(log[0], [0.05, aided.K_GNSS_POS, (9 + 36 + 2.25) / 8, 3, 1, 6 / math.sqrt(8) / 5],
@@ -199,7 +199,7 @@ def test_navigate_aided_defaults_and_checks() -> None:
                                  earth_model="none")
     d = np.diag(st["P"])
     np.testing.assert_allclose(d, [math.radians(1) ** 2] * 2 + [math.radians(10) ** 2] + [1.0] * 3 + [100.0] * 3
-                               + [4.0] * 3 + [9.0] * 3 + [16.0] * 3 + [25.0] * 3 + [2500.0], rtol=1e-15)
+                               + [4.0] * 3 + [9.0] * 3 + [16.0] * 3 + [25.0] * 3 + [2500.0] + [0.0] * 9, rtol=1e-15)
     _, st = aided.navigate_aided(empty, init(sigma_pos=3.0, sigma_vel=0.5, sigma_level=2.0, sigma_yaw=4.0),
                                  spec=spec, earth_model="none", baro_offset_sigma=6.0)
     np.testing.assert_allclose(np.diag(st["P"])[[0, 2, 3, 6, 21]], [math.radians(2) ** 2, math.radians(4) ** 2,
@@ -259,12 +259,12 @@ def test_continued_runs_skip_rows_at_their_start() -> None:
     rows = imu()
 
     def run(s, P, t_rows, gnss):
-        out = np.empty((len(t_rows) + 1, aided.OUT_SIZE))
-        counts = np.zeros((6, 2), dtype=np.int64)
+        out = np.empty((len(t_rows) + 1, aided.ROW_SIZE))
+        counts = np.zeros((len(aided.KIND_NAMES), 2), dtype=np.int64)
         log = np.empty((10, 6))
         n, nl = aided.run_aided(s, cfg, np.ascontiguousarray(t_rows[:, 0]), np.ascontiguousarray(t_rows[:, 1:4]),
                                 np.ascontiguousarray(t_rows[:, 4:7]), gnss, np.empty((0, 3)), np.empty((0, 5)),
-                                np.empty((0, 4)), spec, np.zeros(3), 0.0, 5.0, 1, P, np.zeros(kf.B_SIZE), out, counts,
+                                np.empty((0, 4)), spec, np.zeros(3), 0.0, math.nan, math.nan, math.nan, 5.0, 1, P, np.zeros(kf.B_SIZE), out, counts,
                                 log, np.zeros((0, em.NX, em.NX)), 100)
         return out[:n], counts, log[:nl]
 
@@ -291,8 +291,8 @@ def test_after_k_update_accumulates_and_decays() -> None:
     s[sd.S_NK] = 3
     spec = em.ImuSpec(gyro_gm=1.0, gyro_tau=0.5).as_array()
     P = np.eye(em.NX)
-    bias = np.arange(1.0, 14.0)
-    acc = np.zeros(13)
+    bias = np.r_[np.arange(1.0, 14.0), np.zeros(kf.B_SIZE - 13)]
+    acc = np.zeros(aided.ACC_SIZE)
     sums = np.array([0.1, 0.2, 0.3, 1.0, 2.0, 3.0, 0.05])
     T = aided.after_k_update(s, cfg, spec, P, bias, acc, sums, 2, sd.GEOGRAPHIC)
     assert T == pytest.approx(0.2, rel=1e-15)
@@ -302,18 +302,18 @@ def test_after_k_update_accumulates_and_decays() -> None:
     np.testing.assert_allclose(acc[9:12], c @ [1.0, 2.0, 3.0], atol=1e-15)
     assert acc[12] == pytest.approx(0.2, rel=1e-15)
     e = math.exp(-0.2 / 0.5)
-    np.testing.assert_allclose(bias, [1, 2, 3, 4, 5, 6, 7 * e, 8 * e, 9 * e, 10, 11, 12, 13], rtol=1e-15)
+    np.testing.assert_allclose(bias, [1, 2, 3, 4, 5, 6, 7 * e, 8 * e, 9 * e, 10, 11, 12, 13] + [0] * 9, rtol=1e-15)
     np.testing.assert_array_equal(P, np.eye(em.NX))  # 3 % 2: not propagated
     s[sd.S_NK] = 4
     s[sd.S_T] = 0.35
     spec = em.ImuSpec(accel_gm=1e-9, accel_tau=0.25).as_array()  # a tiny part: its noise 8e-18 /s is negligible
-    bias = np.arange(1.0, 14.0)
+    bias = np.r_[np.arange(1.0, 14.0), np.zeros(kf.B_SIZE - 13)]
     P = np.zeros((em.NX, em.NX))
     P[3:6, 3:6] = np.eye(3)
     T = aided.after_k_update(s, cfg, spec, P, bias, acc, sums, 2, sd.GEOGRAPHIC)
     assert T == pytest.approx(0.1, rel=1e-14)
     e = math.exp(-0.1 / 0.25)
-    np.testing.assert_allclose(bias, [1, 2, 3, 4, 5, 6, 7, 8, 9, 10 * e, 11 * e, 12 * e, 13], rtol=1e-15)
+    np.testing.assert_allclose(bias, [1, 2, 3, 4, 5, 6, 7, 8, 9, 10 * e, 11 * e, 12 * e, 13] + [0] * 9, rtol=1e-15)
     assert np.all(acc == 0.0)  # propagated (4 % 2 == 0) over the 0.3 s accumulated: acc reset
     assert P[6, 6] == pytest.approx(0.3**2, rel=1e-12)  # dp from dv over T = 0.3 s, P_vv = 1
     assert P[6, 3] == pytest.approx(0.3, rel=1e-12)
@@ -328,7 +328,7 @@ def test_push_rate_aided_subtracts_the_bias_estimates() -> None:
     P = np.zeros((em.NX, em.NX))
     bias = np.zeros(kf.B_SIZE)
     bias[0:12] = [0.01, 0.02, 0.03, 0.1, 0.2, 0.3, 0.001, 0.002, 0.003, 0.01, 0.02, 0.03]
-    acc, sums = np.zeros(13), np.zeros(7)
+    acc, sums = np.zeros(aided.ACC_SIZE), np.zeros(7)
     w, f = (0.5, -0.25, 0.125), (1.0, 2.0, -9.0)
     r = aided.push_rate_aided(s, cfg, spec, P, bias, acc, sums, 0.01, *w, *f, 1000, sd.GEOGRAPHIC)
     assert r == 0
@@ -360,7 +360,7 @@ def test_filter_row() -> None:
         P[6 + i, 6 + i], P[3 + i, 3 + i], P[i, i] = (4.0, 9.0, 16.0)[i], (1.0, 0.25, 0.0625)[i], (0.01, 0.04, 0.09)[i]
         P[9 + i, 9 + i], P[15 + i, 15 + i], P[9 + i, 15 + i] = 2.0, 3.0, (-1.0, 0.5, -3.0)[i]
         P[12 + i, 12 + i], P[18 + i, 18 + i], P[12 + i, 18 + i] = 5.0, 6.0, (1.5, -2.5, 0.0)[i]
-    bias = np.arange(1.0, 14.0)
+    bias = np.r_[np.arange(1.0, 14.0), np.zeros(kf.B_SIZE - 13)]
     out = np.full(aided.OUT_SIZE, -7.0)
     aided.filter_row(P, bias, out)
     assert np.all(out[:14] == -7.0)
@@ -371,7 +371,7 @@ def test_filter_row() -> None:
 
 def test_record_counts_and_logs_while_there_is_room() -> None:
     log = np.zeros((2, 6))
-    counts = np.zeros((6, 2), dtype=np.int64)
+    counts = np.zeros((len(aided.KIND_NAMES), 2), dtype=np.int64)
     assert aided._record(log, 0, counts, 1.5, 3, 1, 2.5, 0.25, True) == 1
     assert aided._record(log, 1, counts, 2.5, 3, 1, 9.0, 1.5, False) == 2
     assert aided._record(log, 2, counts, 3.5, 0, 3, 1.0, 0.5, True) == 2  # full: counted, not logged
@@ -436,8 +436,8 @@ def run_direct(rows, bias=None, P=None, gnss=None, baro=None, mag=None, static=N
     s = sd.init_state(0.0, math.radians(LAT0), math.radians(LON0), H0, np.zeros(3), 0.0, 0.0, 0.0) if s is None else s
     P = np.zeros((em.NX, em.NX)) if P is None else P
     bias = np.zeros(kf.B_SIZE) if bias is None else bias
-    out = np.empty((len(rows) + 1, aided.OUT_SIZE))
-    counts = np.zeros((6, 2), dtype=np.int64)
+    out = np.empty((len(rows) + 1, aided.ROW_SIZE))
+    counts = np.zeros((len(aided.KIND_NAMES), 2), dtype=np.int64)
     log = np.empty((40, 6))
     e = np.empty
     n, nl = aided.run_aided(s, cfg, np.ascontiguousarray(rows[:, 0]), np.ascontiguousarray(rows[:, 1:4]),
@@ -445,7 +445,7 @@ def run_direct(rows, bias=None, P=None, gnss=None, baro=None, mag=None, static=N
                             e((0, 3)) if baro is None else np.array(baro, float),
                             e((0, 5)) if mag is None else np.array(mag, float),
                             e((0, 4)) if static is None else np.array(static, float),
-                            (spec or em.ImuSpec()).as_array(), np.zeros(3), 0.0, 5.0, predict_every, P, bias, out,
+                            (spec or em.ImuSpec()).as_array(), np.zeros(3), 0.0, math.nan, math.nan, math.nan, 5.0, predict_every, P, bias, out,
                             counts, log, np.zeros((0, em.NX, em.NX)) if p_hist is None else p_hist, p_every)
     return s, P, bias, out[:n], counts, log[:nl]
 
@@ -476,7 +476,7 @@ def test_samples_two_and_a_duplicate_row() -> None:
     rows = np.insert(rows, 5, rows[4] * [1, 100, 100, 100, 1, 1, 1], axis=0)  # t = 0.05 again, a wild rate
     spec = em.ImuSpec(gyro_bias=1e-3)
     s, P, b, out, counts, log = run_direct(rows, spec=spec, cfg=cfg, static=[[0.0, 0.1, 1.0, 1e-3]],
-                                           P=np.diag([0.0] * 9 + [1e-6] * 3 + [0.0] * 10))
+                                           P=np.diag([0.0] * 9 + [1e-6] * 3 + [0.0] * 19))
     assert len(out) == 5
     np.testing.assert_allclose(out[:, 0], [0.02, 0.04, 0.06, 0.08, 0.1], atol=1e-15)
     assert counts[aided.K_ZARU].tolist() == [1, 0]
@@ -490,7 +490,7 @@ def test_propagation_uses_the_intervals_mean_attitude_and_force() -> None:
     s = sd.init_state(0.0, 0.7, 0.1, 100.0, np.zeros(3), 0.0, 0.0, 0.0)
     c = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
     T, g = 0.5, 9.75
-    acc = np.concatenate([(c * T).ravel(), [0.0, 0.0, -g * T], [T]])
+    acc = np.concatenate([(c * T).ravel(), [0.0, 0.0, -g * T], [T], np.zeros(6)])
     P = np.zeros((em.NX, em.NX))
     P[12:15, 12:15] = np.diag([1.0, 2.0, 3.0])
     P[0:3, 0:3] = np.diag([4.0, 5.0, 0.0])
@@ -500,7 +500,7 @@ def test_propagation_uses_the_intervals_mean_attitude_and_force() -> None:
     np.testing.assert_allclose(P[3:6, 3:6], expect, rtol=1e-14, atol=0)
     # nothing pending: nothing happens
     P0 = P.copy()
-    aided.flush_propagation(s, CFG_LAB1, em.ImuSpec().as_array(), P, np.zeros(13), sd.GEOGRAPHIC)
+    aided.flush_propagation(s, CFG_LAB1, em.ImuSpec().as_array(), P, np.zeros(aided.ACC_SIZE), sd.GEOGRAPHIC)
     np.testing.assert_array_equal(P, P0)
 
 
@@ -511,7 +511,7 @@ def test_propagation_with_the_earth_model() -> None:
     lat = math.radians(LAT0)
     s = sd.init_state(0.0, lat, 0.1, H0, np.zeros(3), 0.0, 0.0, 0.0)
     T = 1.0
-    acc = np.concatenate([(np.eye(3) * T).ravel(), [0.0, 0.0, -G_DATA * T], [T]])
+    acc = np.concatenate([(np.eye(3) * T).ravel(), [0.0, 0.0, -G_DATA * T], [T], np.zeros(6)])
     P = np.zeros((em.NX, em.NX))
     P[8, 8] = 1.0
     aided.flush_propagation(s, cfg, em.ImuSpec().as_array(), P, acc, sd.GEOGRAPHIC)
@@ -526,13 +526,13 @@ def test_skip_rules_of_a_fresh_and_a_continued_run() -> None:
     g_row = lambda t: [t, lat, lon, H0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0]  # noqa: E731
     b_row = lambda t: [t, H0, 1.0]  # noqa: E731
     m_row = lambda t: [t, 1.0, 0.0, 1.0, 0.1]  # noqa: E731
-    P = np.diag([0.01, 0.01, 0.01, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0] + [0.0] * 12 + [1.0])
+    P = np.diag([0.01, 0.01, 0.01, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0] + [0.0] * 12 + [1.0] + [0.0] * 9)
     kw = dict(gnss=[g_row(-2.0), g_row(-1.0), g_row(0.0), g_row(0.03)], baro=[b_row(-2.0), b_row(-1.0), b_row(0.0),
               b_row(0.03)], mag=[m_row(-2.0), m_row(-1.0), m_row(0.0), m_row(0.03)],
               static=[[-3.0, -2.0, 0.5, 1.0], [-2.0, -1.0, 0.5, 1.0], [0.0, 0.01, 0.5, 1.0]])
     s, P1, _, out, counts, log = run_direct(imu(5), P=P.copy(), **kw)
-    assert counts[:, 0].tolist() == [2, 2, 2, 2, 1, 1]  # the window [0, 0.01]: a ZUPT and the ZARU at 0.01
-    assert counts[:, 1].tolist() == [0] * 6
+    assert counts[:, 0].tolist() == [2, 2, 2, 2, 1, 1, 0]  # the window [0, 0.01]: a ZUPT and the ZARU at 0.01
+    assert counts[:, 1].tolist() == [0] * 7
     assert log[0, 0] == 0.0 and log[0, 1] == aided.K_GNSS_POS
     # continued after exactly one update: rows at its time (0.01) are skipped, later ones used
     s = sd.init_state(0.0, lat, lon, H0, np.zeros(3), 0.0, 0.0, 0.0)
@@ -541,7 +541,7 @@ def test_skip_rules_of_a_fresh_and_a_continued_run() -> None:
     kw = dict(gnss=[g_row(0.01), g_row(0.03)], baro=[b_row(0.01), b_row(0.03)], mag=[m_row(0.01), m_row(0.03)],
               static=[[0.005, 0.04, 0.005, 1.0]])
     s, P2, _, out, counts, log = run_direct(imu(5)[1:], P=P2, s=s, **kw)
-    assert counts[:, 0].tolist() == [1, 1, 1, 1, 3, 1]
+    assert counts[:, 0].tolist() == [1, 1, 1, 1, 3, 1, 0]
     # one window before the start, then one at it
     _, _, _, _, counts, _ = run_direct(imu(3), P=P.copy(), static=[[-2.0, -1.0, 0.5, 1.0], [0.0, 0.02, 0.5, 1.0]])
     assert counts[aided.K_ZUPT].tolist() == [2, 0]
@@ -589,7 +589,7 @@ def test_late_measurements_are_taken_back_along_the_velocity() -> None:
     time, are applied at the update of 0.05 s with zero innovation (p(t_m) = p(t_k) - v (t_k - t_m))."""
     lat, lon = math.radians(LAT0), math.radians(LON0)
     s = sd.init_state(0.0, lat, lon, H0, np.array([1.0, 0.0, 1.0]), 0.0, 0.0, 0.0)
-    P = np.diag([0.0] * 6 + [1.0] * 3 + [0.0] * 12 + [1.0])
+    P = np.diag([0.0] * 6 + [1.0] * 3 + [0.0] * 12 + [1.0] + [0.0] * 9)
     tm = 0.045
     s, P, b, out, c, log = run_direct(imu(), P=P, s=s, gnss=[[tm, lat + tm / (RN + H0), lon, H0 - tm, NAN, NAN, NAN,
                                                                 1.0, 1.0, 1.0]], baro=[[tm, H0 - tm, 1.0]])
@@ -605,7 +605,7 @@ def test_partial_rows_are_not_used() -> None:
             [0.04, lat, lon, NAN, 0.0, 0.0, NAN, 1.0, 1.0, 1.0]]
     baro = [[0.02, NAN, 1.0]]
     mag = [[0.02, NAN, 1.0, 1.0, 0.1], [0.03, 1.0, NAN, 1.0, 0.1], [0.04, 1.0, 0.0, NAN, 0.1]]
-    P = np.diag([0.01] * 3 + [1.0] * 6 + [0.0] * 12 + [1.0])
+    P = np.diag([0.01] * 3 + [1.0] * 6 + [0.0] * 12 + [1.0] + [0.0] * 9)
     _, _, _, out, c, log = run_direct(imu(), P=P, gnss=gnss, baro=baro, mag=mag)
     assert c.sum() == 0 and len(log) == 0
 
@@ -651,15 +651,15 @@ def test_log_rows_of_every_kind() -> None:
     """Each measurement's log row: t (its own, or the update's for ZUPT/ZARU), kind, NIS, dof, accepted, ratio
     (NIS and ratio worked by hand: P 1, R 1, nu 1 per measured axis; gate 5)."""
     lat, lon = math.radians(LAT0), math.radians(LON0)
-    P = np.diag([0.0, 0.0, 1.0] + [1.0] * 3 + [0.0] * 3 + [0.0] * 12 + [1.0])
+    P = np.diag([0.0, 0.0, 1.0] + [1.0] * 3 + [0.0] * 3 + [0.0] * 12 + [1.0] + [0.0] * 9)
     gnss = [[0.02, NAN, NAN, NAN, -1.0, -1.0, -1.0, 1.0, 1.0, 1.0]]
     rows = imu(wz=0.0)
     _, _, _, out, c, log = run_direct(rows, P=P, gnss=gnss)
     np.testing.assert_allclose(log[0], [0.02, aided.K_GNSS_VEL, 1.5, 3, 1, 1 / math.sqrt(2) / 5], rtol=1e-12)
-    P = np.diag([0.0, 0.0, 0.01] + [0.0] * 18 + [0.0])
+    P = np.diag([0.0, 0.0, 0.01] + [0.0] * 18 + [0.0] * 10)
     _, _, _, out, c, log = run_direct(rows, P=P, mag=[[0.03, math.cos(0.1), -math.sin(0.1), 0.0, 0.1]])
     np.testing.assert_allclose(log[0], [0.03, aided.K_MAG, 0.5, 1, 1, 0.1 / math.sqrt(0.02) / 5], rtol=1e-12)
-    P = np.diag([0.0] * 3 + [1.0] * 3 + [0.0] * 3 + [0.0] * 2 + [1e-6] + [0.0] * 10)
+    P = np.diag([0.0] * 3 + [1.0] * 3 + [0.0] * 3 + [0.0] * 2 + [1e-6] + [0.0] * 19)
     s = sd.init_state(0.0, lat, lon, H0, np.array([0.0, 0.0, 1.0]), 0.0, 0.0, 0.0)
     _, _, _, out, c, log = run_direct(imu(wz=1e-3), P=P, s=s, static=[[0.0, 0.01, 1.0, 1e-3]])
     np.testing.assert_allclose(log[0], [0.01, aided.K_ZUPT, 0.5, 3, 1, 1 / math.sqrt(2) / 5], rtol=1e-9)
@@ -675,7 +675,7 @@ def test_rest_windows_in_a_row() -> None:
     rows[:, 3] = 2e-3 * DT
     rows[1, 3] = rows[8, 3] = 1.0 * DT  # t = 0.02 and 0.09
     rows[5:8, 3] = 6e-3 * DT  # 0.06 .. 0.08
-    P = np.diag([0.0] * 3 + [1.0] * 3 + [0.0] * 5 + [1.0] + [0.0] * 10)
+    P = np.diag([0.0] * 3 + [1.0] * 3 + [0.0] * 5 + [1.0] + [0.0] * 19)
     static = [[0.02, 0.04, 1.0, 1.0], [0.045, 0.05, 1.0, 1.0], [0.055, 0.085, 1.0, 1.0], [0.091, 0.095, 1.0, 1.0]]
     _, _, b, out, c, log = run_direct(rows, P=P, static=static)
     assert c[aided.K_ZUPT].tolist() == [7, 0] and c[aided.K_ZARU].tolist() == [3, 0]
@@ -691,7 +691,7 @@ def test_rest_windows_in_a_row() -> None:
 
 def test_direct_p_history_keeps_only_what_fits() -> None:
     """p_hist receives P after every p_every-th output row while it has room (run_aided docstring)."""
-    P = np.diag([0.0] * 6 + [4.0] * 3 + [0.0] * 13)
+    P = np.diag([0.0] * 6 + [4.0] * 3 + [0.0] * 22)
     hist = np.full((2, em.NX, em.NX), -1.0)
     _, _, _, out, _, _ = run_direct(imu(), P=P, p_hist=hist, p_every=3)
     assert len(out) == N_ROWS
@@ -728,15 +728,15 @@ def test_after_k_update_accumulates_over_several_updates() -> None:
     cfg = CFG_LAB1
     s = sd.init_state(0.0, 0.7, 0.1, 100.0, np.zeros(3), 0.0, 0.0, 0.0)
     P = np.zeros((em.NX, em.NX))
-    acc, sums = np.zeros(13), np.zeros(7)
+    acc, sums = np.zeros(aided.ACC_SIZE), np.zeros(7)
     spec = em.ImuSpec().as_array()
     s[sd.S_T], s[sd.S_NK] = 0.25, 1
     sums[:] = [0, 0, 0, 1.0, 2.0, 3.0, 0.0]
-    aided.after_k_update(s, cfg, spec, P, np.zeros(13), acc, sums, 3, sd.GEOGRAPHIC)
+    aided.after_k_update(s, cfg, spec, P, np.zeros(kf.B_SIZE), acc, sums, 3, sd.GEOGRAPHIC)
     s[sd.S_C : sd.S_C + 9] = [0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0]  # turned 90 deg
     s[sd.S_T], s[sd.S_NK] = 0.75, 2
     sums[0:6] = [0, 0, 0, 1.0, 2.0, 3.0]
-    aided.after_k_update(s, cfg, spec, P, np.zeros(13), acc, sums, 3, sd.GEOGRAPHIC)
+    aided.after_k_update(s, cfg, spec, P, np.zeros(kf.B_SIZE), acc, sums, 3, sd.GEOGRAPHIC)
     np.testing.assert_allclose(acc[0:9], [0.25, -0.5, 0.0, 0.5, 0.25, 0.0, 0.0, 0.0, 0.75], atol=1e-15)
     np.testing.assert_allclose(acc[9:12], [1.0 - 2.0, 2.0 + 1.0, 6.0], atol=1e-15)
     assert acc[12] == 0.75 and np.all(P == 0.0)
@@ -750,7 +750,7 @@ def test_push_rate_aided_velocity() -> None:
     bias = np.zeros(kf.B_SIZE)
     bias[0:12] = [0.01, 0.02, 0.035, 0.1, 0.2, 0.3, 0.001, 0.002, 0.004, 0.01, 0.02, 0.03]
     w_raw, f_raw = np.array([0.5, -0.25, 0.125]), np.array([1.0, 2.0, -9.0])
-    args = (em.ImuSpec().as_array(), np.zeros((em.NX, em.NX)), bias, np.zeros(13), np.zeros(7))
+    args = (em.ImuSpec().as_array(), np.zeros((em.NX, em.NX)), bias, np.zeros(aided.ACC_SIZE), np.zeros(7))
     for t in (0.01, 0.02):
         r = aided.push_rate_aided(s, cfg, *args, t, *w_raw, *f_raw, 1000, sd.GEOGRAPHIC)
     assert r == 1
@@ -763,7 +763,7 @@ def test_push_rate_aided_velocity() -> None:
 
 def test_small_things() -> None:
     """_record counts every rejection; filter_row's sigma of a bias sum below 1; _columns takes None as missing."""
-    log, counts = np.zeros((4, 6)), np.zeros((6, 2), dtype=np.int64)
+    log, counts = np.zeros((4, 6)), np.zeros((len(aided.KIND_NAMES), 2), dtype=np.int64)
     n = 0
     for _ in range(3):
         n = aided._record(log, n, counts, 1.0, 2, 1, 9.0, 2.0, False)
@@ -773,7 +773,7 @@ def test_small_things() -> None:
         P[12 + i, 12 + i], P[18 + i, 18 + i], P[12 + i, 18 + i] = 0.25, 0.0625, 0.0
         P[9 + i, 9 + i], P[15 + i, 15 + i] = 0.04, 0.0
     out = np.zeros(aided.OUT_SIZE)
-    aided.filter_row(P, np.zeros(13), out)
+    aided.filter_row(P, np.zeros(kf.B_SIZE), out)
     np.testing.assert_allclose(out[29:35], [0.2] * 3 + [math.sqrt(0.3125)] * 3, rtol=1e-15)
     np.testing.assert_array_equal(aided._columns([[1.0, 2.0, None]], 3, (None, None, 0.5), "baro"),
                                   [[1.0, 2.0, 0.5]])
@@ -838,8 +838,9 @@ def test_the_nis_log_holds_every_measurement() -> None:
 
 def test_module_level_names_and_kinds() -> None:
     """The constants mutmut does not mutate, by value (aided.py's module docstring and LOG_COLUMNS)."""
-    assert (aided.K_GNSS_POS, aided.K_GNSS_VEL, aided.K_BARO, aided.K_MAG, aided.K_ZUPT, aided.K_ZARU) == tuple(range(6))
-    assert aided.KIND_NAMES == ("gnss_pos", "gnss_vel", "baro", "mag", "zupt", "zaru")
+    assert (aided.K_GNSS_POS, aided.K_GNSS_VEL, aided.K_BARO, aided.K_MAG, aided.K_ZUPT, aided.K_ZARU,
+            aided.K_MAG_DISTURBED) == tuple(range(7))
+    assert aided.KIND_NAMES == ("gnss_pos", "gnss_vel", "baro", "mag", "zupt", "zaru", "mag_disturbed")
     assert aided.GNSS_COLUMNS == ("t", "lat", "lon", "h", "vn", "ve", "vd", "sigma_h", "sigma_v", "sigma_vel")
     assert aided.BARO_COLUMNS == ("t", "h", "sigma") and aided.MAG_COLUMNS == ("t", "mx", "my", "mz", "sigma")
     assert aided.STATIC_COLUMNS == ("t0", "t1", "sigma_v", "sigma_w")

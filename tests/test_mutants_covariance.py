@@ -79,14 +79,14 @@ def typed_sources(s: cov.AnalysisSpec) -> dict[str, tuple[tuple[int, ...], tuple
         "gyro_instability": ((15, 16, 17), (i.gyro_gm**2,) * 3, z9 + (2.0 * i.gyro_gm**2 / i.gyro_tau,) * 3),
         "gyro_rate_random_walk": ((9, 10, 11), (0.0,) * 3, z9 + (i.gyro_rrw**2,) * 3),
         "gyro_random_walk": ((), (), (i.gyro_arw**2,) * 3 + (0.0,) * 6),
-        "gyro_scale": ((22, 26, 30), (s.gyro_scale**2,) * 3, (0.0,) * 12),
-        "gyro_misalignment": ((23, 24, 25, 27, 28, 29), (s.gyro_misalignment**2,) * 6, (0.0,) * 15),
+        "gyro_scale": ((31, 35, 39), (s.gyro_scale**2,) * 3, (0.0,) * 12),
+        "gyro_misalignment": ((32, 33, 34, 36, 37, 38), (s.gyro_misalignment**2,) * 6, (0.0,) * 15),
         "accel_bias": ((12, 13, 14), (i.accel_bias**2,) * 3, (0.0,) * 12),
         "accel_instability": ((18, 19, 20), (i.accel_gm**2,) * 3, z9 + (2.0 * i.accel_gm**2 / i.accel_tau,) * 3),
         "accel_rate_random_walk": ((12, 13, 14), (0.0,) * 3, z9 + (i.accel_rrw**2,) * 3),
         "accel_random_walk": ((), (), (0.0,) * 3 + (i.accel_vrw**2,) * 3 + (0.0,) * 3),
-        "accel_scale": ((31, 35, 39), (s.accel_scale**2,) * 3, (0.0,) * 12),
-        "accel_misalignment": ((32, 33, 34, 36, 37, 38), (s.accel_misalignment**2,) * 6, (0.0,) * 15),
+        "accel_scale": ((40, 44, 48), (s.accel_scale**2,) * 3, (0.0,) * 12),
+        "accel_misalignment": ((41, 42, 43, 45, 46, 47), (s.accel_misalignment**2,) * 6, (0.0,) * 15),
     }
 
 
@@ -127,10 +127,10 @@ def reference(tr: cov.TrackMeans, s: cov.AnalysisSpec, states, p0, q, earth_on: 
     qc = qc * np.outer(keep, keep)
     out = [P[:9, :9].copy()]
     for k in range(len(tr.t) - 1):
-        F = np.zeros((40, 40))
-        F[:22, :22] = em.system_matrix(tr.c[k], tr.v[k], tr.lat[k], tr.h[k], tr.f_n[k], s.imu.as_array(), earth_on)
-        F[0:3, 22:31] = -tr.cw[k].reshape(3, 9)  # d(phi)/dt += -C[:, i] w_j K_g[i, j]
-        F[3:6, 31:40] = -tr.cf[k].reshape(3, 9)  # d(dv)/dt += -C[:, i] f_j K_a[i, j]
+        F = np.zeros((em.NX + 18, em.NX + 18))
+        F[:em.NX, :em.NX] = em.system_matrix(tr.c[k], tr.v[k], tr.lat[k], tr.h[k], tr.f_n[k], s.imu.as_array(), earth_on)
+        F[0:3, em.NX:em.NX + 9] = -tr.cw[k].reshape(3, 9)  # d(phi)/dt += -C[:, i] w_j K_g[i, j]
+        F[3:6, em.NX + 9:em.NX + 18] = -tr.cf[k].reshape(3, 9)  # d(dv)/dt += -C[:, i] f_j K_a[i, j]
         Fs = F[np.ix_(idx, idx)] * np.outer(keep, keep)
         T = tr.t[k + 1] - tr.t[k]
         phi = np.eye(m) + Fs * T + (Fs * T) @ (Fs * T) / 2.0
@@ -144,12 +144,13 @@ def reference(tr: cov.TrackMeans, s: cov.AnalysisSpec, states, p0, q, earth_on: 
 
 
 def test_layout_units_and_column_names() -> None:
-    """The augmented layout of the module docstring (K_g at 22.., K_a at 31.., 40 states), the ppm and arcsec
-    units and the contract's source and column names in their documented order."""
-    assert (cov.NNAV, cov.X_KG, cov.X_KA, cov.NA) == (9, 22, 31, 40)
+    """The augmented layout of the module docstring (K_g at 31.., K_a at 40.., 49 states: after the filter's 31),
+    the ppm and arcsec units and the contract's source and column names in their documented order."""
+    assert (cov.NNAV, cov.X_KG, cov.X_KA, cov.NA) == (9, 31, 40, 49)
     assert cov.PPM == 1e-6
     assert cov.ARCSEC == pytest.approx(math.pi / 648000.0, rel=1e-15, abs=0)  # 1/3600 deg
-    assert cov.ANALYSIS_KEYS == ("gyro_scale", "accel_scale", "gyro_misalignment", "accel_misalignment")
+    assert cov.ANALYSIS_KEYS == ("gyro_misalignment", "accel_misalignment")
+    assert em.SPEC_KEYS[-2:] == ("gyro_scale", "accel_scale")
     assert cov.SOURCES == NAMES
     assert cov.SIGMA_COLUMNS == ("sigma_n", "sigma_e", "sigma_d", "sigma_vn", "sigma_ve", "sigma_vd",
                                  "sigma_att_n", "sigma_att_e", "sigma_att_d")
@@ -159,11 +160,12 @@ def test_layout_units_and_column_names() -> None:
 def test_analysis_spec_is_checked_and_made_float() -> None:
     """Each scale/misalignment figure is a float >= 0 (zero allowed); negative, infinite and NaN are refused."""
     s = cov.AnalysisSpec(em.ImuSpec(), gyro_scale=1, accel_scale=2, gyro_misalignment=3, accel_misalignment=4)
-    assert [type(getattr(s, n)) for n in cov.ANALYSIS_KEYS] == [float] * 4
+    names = ("gyro_scale", "accel_scale") + cov.ANALYSIS_KEYS
+    assert [type(getattr(s, n)) for n in names] == [float] * 4
     assert (s.gyro_scale, s.accel_scale, s.gyro_misalignment, s.accel_misalignment) == (1.0, 2.0, 3.0, 4.0)
     zero = cov.AnalysisSpec(em.ImuSpec(), 0.0, 0.0, 0.0, 0.0)
     assert (zero.gyro_scale, zero.accel_scale, zero.gyro_misalignment, zero.accel_misalignment) == (0.0,) * 4
-    for name in cov.ANALYSIS_KEYS:
+    for name in names:
         for bad, text in ((-1e-300, r"-1e-300"), (math.inf, "inf"), (math.nan, "nan")):
             with pytest.raises(ValueError, match=rf"^{name} must be finite and >= 0, got {text}$"):
                 cov.AnalysisSpec(em.ImuSpec(), **{name: bad})
@@ -192,7 +194,7 @@ def test_spec_from_grade_takes_the_magnitudes_as_one_sigma() -> None:
         assert s.accel_scale == pytest.approx(as_ * 1e-6, rel=1e-15, abs=0)
         assert s.gyro_misalignment == pytest.approx(mis, rel=1e-12, abs=0)
         assert s.accel_misalignment == pytest.approx(mis, rel=1e-12, abs=0)
-        assert s.imu == em.spec_from_grade(grade)
+        assert s.imu == em.spec_from_grade(grade, scale_factors=True)
 
 
 def test_source_index_and_activity() -> None:
@@ -292,7 +294,7 @@ def test_track_means_needs_one_whole_step() -> None:
 
 
 def test_analysis_matrix_is_the_filters_f_plus_the_k_columns() -> None:
-    """F[:22, :22] is errmodel.system_matrix (Earth on and off, spec passed on: a Gauss-Markov -1/tau);
+    """F[:em.NX, :em.NX] is errmodel.system_matrix (Earth on and off, spec passed on: a Gauss-Markov -1/tau);
     K_g[i, j] enters d(phi_r)/dt as -cw[r, i, j], K_a[i, j] enters d(dv_r)/dt as -cf[r, i, j]; nothing
     else couples to or from the 18 random constants."""
     rng = np.random.default_rng(5)
@@ -303,18 +305,18 @@ def test_analysis_matrix_is_the_filters_f_plus_the_k_columns() -> None:
     sp = em.ImuSpec(gyro_gm=1e-5, gyro_tau=250.0).as_array()
     for earth_on in (True, False):
         F = cov.analysis_matrix(c, v, math.radians(52.0), 300.0, f_n, cw, cf, sp, earth_on)
-        assert F.shape == (40, 40)
-        np.testing.assert_array_equal(F[:22, :22], em.system_matrix(c, v, math.radians(52.0), 300.0, f_n, sp, earth_on))
+        assert F.shape == (em.NX + 18, em.NX + 18)
+        np.testing.assert_array_equal(F[:em.NX, :em.NX], em.system_matrix(c, v, math.radians(52.0), 300.0, f_n, sp, earth_on))
         assert F[15, 15] == -1.0 / 250.0
         for r in range(3):
             for i in range(3):
                 for j in range(3):
-                    assert F[r, 22 + 3 * i + j] == -cw[r, i, j]
-                    assert F[3 + r, 31 + 3 * i + j] == -cf[r, i, j]
+                    assert F[r, em.NX + 3 * i + j] == -cw[r, i, j]
+                    assert F[3 + r, em.NX + 9 + 3 * i + j] == -cf[r, i, j]
         rest = F.copy()
-        rest[:22, :22] = 0.0
-        rest[0:3, 22:31] = 0.0
-        rest[3:6, 31:40] = 0.0
+        rest[:em.NX, :em.NX] = 0.0
+        rest[0:3, em.NX:em.NX + 9] = 0.0
+        rest[3:6, em.NX + 9:em.NX + 18] = 0.0
         assert not rest.any()
     assert F[0, 1] == 0.0  # laboratory mode: no Earth rate
     assert cov.analysis_matrix(c, v, math.radians(52.0), 300.0, f_n, cw, cf, sp, True)[0, 1] != 0.0

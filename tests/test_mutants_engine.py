@@ -901,7 +901,8 @@ def test_body_rate_is_the_raw_rate_minus_both_gyro_bias_parts_to_the_bit() -> No
     for _ in range(200):
         flt.bias[:] = rng.normal(0.0, 1e-2, flt.bias.size)
         w = tuple(float(x) for x in rng.normal(0.0, 0.5, 3))
-        want = np.array(w) - (flt.bias[kalman.B_BG:kalman.B_BG + 3] + flt.bias[kalman.B_GG:kalman.B_GG + 3])
+        want = (np.array(w) - (flt.bias[kalman.B_BG:kalman.B_BG + 3] + flt.bias[kalman.B_GG:kalman.B_GG + 3])) \
+            / (1.0 + flt.bias[kalman.B_SG:kalman.B_SG + 3])  # the scale factor: (w - b) / (1 + s)
         got = flt.body_rate(w)
         assert all(type(x) is float for x in got)
         assert np.array_equal(np.array(got), want)

@@ -34,6 +34,7 @@ from support import A, E2, OMEGA, cbn, gamma, quat_zyx
 DEG = math.pi / 180.0
 CFG = sd.make_config(samples=2)  # WGS-84 Earth
 CFG_LAB = sd.make_config(samples=2, earth_model="none")  # laboratory mode
+NO_BIAS = np.zeros(kf.B_SIZE)  # the filter's sensor-error estimates, all zero
 position = for_frame(sd.position, sd.GEOGRAPHIC)
 
 
@@ -89,17 +90,18 @@ def test_imu_spec_is_checked_and_made_float() -> None:
 
 
 def test_as_array_puts_each_figure_at_its_index() -> None:
-    s = em.ImuSpec(1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0)
+    s = em.ImuSpec(1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 12.0, 13.0)
     sp = s.as_array(11.0)
-    assert sp.shape == (em.SP_SIZE,) and em.SP_SIZE == 11
+    assert sp.shape == (em.SP_SIZE,) and em.SP_SIZE == 13
     expect = {em.SP_GYRO_ARW: 1.0, em.SP_GYRO_BIAS: 2.0, em.SP_GYRO_GM: 3.0, em.SP_GYRO_TAU: 4.0,
               em.SP_GYRO_RRW: 5.0, em.SP_ACC_VRW: 6.0, em.SP_ACC_BIAS: 7.0, em.SP_ACC_GM: 8.0,
-              em.SP_ACC_TAU: 9.0, em.SP_ACC_RRW: 10.0, em.SP_BARO_DRIFT: 11.0}
+              em.SP_ACC_TAU: 9.0, em.SP_ACC_RRW: 10.0, em.SP_BARO_DRIFT: 11.0, em.SP_GYRO_SCALE: 12.0,
+              em.SP_ACC_SCALE: 13.0}
     for i, v in expect.items():
         assert sp[i] == v
     assert s.as_array()[em.SP_BARO_DRIFT] == 0.0  # default: no baro drift
     # ImuSpec's defaults: no noise, no bias, tau 3600 s
-    np.testing.assert_array_equal(em.ImuSpec().as_array(), [0, 0, 0, 3600.0, 0, 0, 0, 0, 3600.0, 0, 0])
+    np.testing.assert_array_equal(em.ImuSpec().as_array(), [0, 0, 0, 3600.0, 0, 0, 0, 0, 3600.0, 0, 0, 0, 0])
     assert s.as_array(3)[em.SP_BARO_DRIFT] == 3.0
 
 
@@ -132,10 +134,12 @@ def test_spec_from_contract_keys_units() -> None:
 
 def test_spec_to_keys_is_the_inverse() -> None:
     s = em.ImuSpec(gyro_arw=0.3 * DEG / 60.0, gyro_bias=36.0 * DEG / 3600.0, gyro_gm=7.2 * DEG / 3600.0,
-                   gyro_tau=120.0, gyro_rrw=1.0, accel_vrw=0.001, accel_bias=0.02, accel_gm=0.003, accel_tau=240.0)
+                   gyro_tau=120.0, gyro_rrw=1.0, accel_vrw=0.001, accel_bias=0.02, accel_gm=0.003, accel_tau=240.0,
+                   gyro_scale=1.5e-3, accel_scale=2.5e-4)
     k = em.spec_to_keys(s)
     expect = {"gyro_arw": 0.3, "gyro_bias": 36.0, "gyro_bias_instability": 7.2, "gyro_bias_tau": 120.0,
-              "accel_vrw": 0.06, "accel_bias": 0.02, "accel_bias_instability": 0.003, "accel_bias_tau": 240.0}
+              "accel_vrw": 0.06, "accel_bias": 0.02, "accel_bias_instability": 0.003, "accel_bias_tau": 240.0,
+              "gyro_scale": 1500.0, "accel_scale": 250.0}
     assert list(k) == list(expect) == list(em.SPEC_KEYS)
     for name, v in expect.items():
         assert k[name] == pytest.approx(v, rel=1e-15, abs=0), name
@@ -282,7 +286,7 @@ def expected_F(c, v, lat, h, f_n, tau_g=None, tau_a=None) -> np.ndarray:
     s, co, t = math.sin(lat), math.cos(lat), math.tan(lat)
     W = OMEGA
     w_in = np.array([W * co + ve / re, -vn / rn, -W * s - ve * t / re])
-    F = np.zeros((22, 22))
+    F = np.zeros((em.NX, em.NX))
     P, V, D = 0, 3, 6  # phi, dv, dp blocks
     F[P:P + 3, P:P + 3] = -skew(w_in)  # F_11
     F[P:P + 3, V:V + 3] = [[0, -1 / re, 0], [1 / rn, 0, 0], [0, t / re, 0]]  # F_12
@@ -356,7 +360,7 @@ def test_system_matrix_laboratory_mode() -> None:
     only -[f^n x], the identity dp/dv and the bias blocks remain; without an instability no -1/tau."""
     spec = em.ImuSpec(gyro_tau=250.0, accel_tau=125.0).as_array()
     F = em.system_matrix(C_TEST, np.array([35.0, -20.0, 4.0]), 52.0 * DEG, 1200.0, F_N, spec, False)
-    E = np.zeros((22, 22))
+    E = np.zeros((em.NX, em.NX))
     E[3:6, 0:3] = -skew(F_N)
     E[6:9, 3:6] = np.eye(3)
     E[0:3, 9:12] = E[0:3, 15:18] = -C_TEST
@@ -381,8 +385,8 @@ def test_discretise_of_the_system_matrix() -> None:
     F = em.system_matrix(np.eye(3), np.zeros(3), 0.0, 0.0, np.array([0.0, 0.0, -8.0]), spec, False)
     phi, qd = em.discretise(F, spec, 0.5)
     ft = F * 0.5
-    np.testing.assert_array_equal(phi, np.eye(22) + ft + ft @ ft / 2)
-    q = np.zeros(22)
+    np.testing.assert_array_equal(phi, np.eye(em.NX) + ft + ft @ ft / 2)
+    q = np.zeros(em.NX)
     q[0:3], q[3:6], q[21] = 0.25, 0.0625, 4.0
     np.testing.assert_array_equal(qd, (phi @ np.diag(q) @ phi.T + np.diag(q)) * 0.25)
     assert qd[21, 21] == 2.0 and qd[0, 0] == 0.125
@@ -591,7 +595,7 @@ def test_feedback_corrects_attitude_velocity_position_and_biases() -> None:
     x[em.X_DV : em.X_DV + 3] = [0.5, -0.25, 0.125]
     dp = np.array([30.0, -20.0, 4.0])
     x[em.X_DP : em.X_DP + 3] = dp
-    x[em.X_BG:] = np.arange(1.0, 14.0)
+    x[em.X_BG:] = np.arange(1.0, em.NX - em.X_BG + 1.0)
     bias = np.full(kf.B_SIZE, 100.0)
     kf.feedback(s, CFG, bias, x)
     assert np.all(x == 0.0)
@@ -615,7 +619,7 @@ def test_feedback_corrects_attitude_velocity_position_and_biases() -> None:
     lat_c = math.atan2(-cne_exp[2, 2], math.hypot(cne_exp[2, 0], cne_exp[2, 1]))
     assert s[sd.S_LATC] == pytest.approx(lat_c, rel=0, abs=1e-15)  # kept beside C_n^e
     assert s[sd.S_LONC] == pytest.approx(lon, rel=0, abs=1e-15) and s[sd.S_LATC] == lat
-    np.testing.assert_array_equal(bias, 100.0 - np.arange(1.0, 14.0))
+    np.testing.assert_array_equal(bias, 100.0 - np.arange(1.0, em.NX - em.X_BG + 1.0))
     assert s[sd.S_T] == 3.0 and np.all(s[sd.S_PF : sd.S_PF + 3] == 0.0)
 
 
@@ -719,7 +723,7 @@ def test_gnss_position_with_lever_arm_and_latency() -> None:
     la = cbn(*ATT) @ lever
     expect = np.array([-100.0, 50.0, 3.0]) + la - V0 * dt
     np.testing.assert_allclose(nu, expect, rtol=0, atol=2e-8)  # lat/lon through C_n^e: 1e-16 rad ~ 1e-9 m
-    He = np.zeros((3, 22))
+    He = np.zeros((3, em.NX))
     He[:, 0:3] = -skew(la)
     He[:, 3:6] = -dt * np.eye(3)
     He[:, 6:9] = np.eye(3)
@@ -749,7 +753,7 @@ def test_gnss_velocity_with_lever_arm_and_latency() -> None:
     v_prev = np.array([11.0, -6.0, 1.0])
     v_tm = V0 - 0.25 * (V0 - v_prev)
     np.testing.assert_allclose(nu, v_tm + cwl - v_m, rtol=0, atol=4e-15)
-    He = np.zeros((3, 22))
+    He = np.zeros((3, em.NX))
     He[:, 0:3] = -skew(cwl)
     He[:, 3:6] = np.eye(3)
     He[:, 9:12] = He[:, 15:18] = c @ skew(lever)
@@ -767,7 +771,7 @@ def test_baro_height_with_offset_and_latency() -> None:
     bias[kf.B_BARO] = 7.0
     nu, H, R = kf.baro_height(s, bias, 240.0, 0.5, 0.75)
     assert nu.shape == (1,) and nu[0] == 250.0 + 1.5 * 0.5 + 7.0 - 240.0
-    He = np.zeros((1, 22))
+    He = np.zeros((1, em.NX))
     He[0, 8], He[0, 5], He[0, 21] = -1.0, 0.5, 1.0
     np.testing.assert_array_equal(H, He)
     np.testing.assert_array_equal(R, [[0.5625]])
@@ -779,9 +783,9 @@ def test_heading() -> None:
     s = state()
     roll, pitch, yaw = ATT
     nu, H, R = kf.heading(s, 195.0 * DEG, 0.1)
-    assert nu.shape == (1,) and H.shape == (1, 22) and R.shape == (1, 1)
+    assert nu.shape == (1,) and H.shape == (1, em.NX) and R.shape == (1, 1)
     assert nu[0] == pytest.approx(5.0 * DEG, rel=1e-13, abs=0)
-    He = np.zeros((1, 22))
+    He = np.zeros((1, em.NX))
     He[0, 0:3] = [math.tan(pitch) * math.cos(yaw), math.tan(pitch) * math.sin(yaw), 1.0]
     np.testing.assert_allclose(H, He, rtol=0, atol=1e-15)
     np.testing.assert_allclose(R, [[0.01]], rtol=1e-15, atol=0)
@@ -791,7 +795,7 @@ def test_heading() -> None:
 
 def mag_nu(s: np.ndarray, cfg: np.ndarray, m_b: np.ndarray, w: np.ndarray, dt: float, dec: float) -> np.ndarray:
     """The magnetometer innovation of sample m_b, dt old, body rate w (kalman.mag_level then mag_heading)."""
-    return kf.mag_heading(kf.mag_level(s, cfg, m_b, w, dt), dec, 1.0, 0.02)[0]
+    return kf.mag_heading(s, kf.mag_level(s, cfg, NO_BIAS, m_b, w, dt), dec, 1.0, 1.0, 0.02)[0]
 
 
 def test_mag_level_and_inclination() -> None:
@@ -800,24 +804,28 @@ def test_mag_level_and_inclination() -> None:
     s = state()
     inc, dec = 60.0 * DEG, 10.0 * DEG
     m_n = 48.0 * np.array([math.cos(inc) * math.cos(dec), math.cos(inc) * math.sin(dec), math.sin(inc)])
-    m = kf.mag_level(s, CFG, cbn(*ATT).T @ m_n, np.array([0.1, 0.2, 0.3]), 0.0)
+    m = kf.mag_level(s, CFG, NO_BIAS, cbn(*ATT).T @ m_n, np.array([0.1, 0.2, 0.3]), 0.0)
     np.testing.assert_allclose(m, m_n, rtol=0, atol=1e-12)
     assert kf.mag_tan_inclination(m) == pytest.approx(math.tan(inc), rel=1e-12)
     assert kf.mag_tan_inclination(np.array([-3.0, 4.0, -10.0])) == pytest.approx(-2.0, rel=1e-15)
 
 
 def test_mag_inclination_is_the_mean_of_the_accepted_samples() -> None:
-    """Before any accepted sample the model's tan I is the sample's own; mag_accept adds each accepted one to
-    [sum, count], and the model's tan I is then their mean, whatever the sample at hand."""
-    incl = np.zeros(2)
+    """Before any accepted sample the model's tan I and horizontal strength are the sample's own;
+    mag_accept adds each accepted one to [sum tan I, count, sum |m_h|], and the model's figures are then
+    their means, whatever the sample at hand."""
+    incl = np.zeros(kf.MAG_STATS)
     a, b, c = np.array([3.0, 4.0, 10.0]), np.array([0.0, 2.0, 1.0]), np.array([1.0, 0.0, 7.0])
     assert kf.mag_inclination(incl, a) == pytest.approx(2.0, rel=1e-15)
+    assert kf.mag_horizontal(incl, a) == pytest.approx(5.0, rel=1e-15)
     kf.mag_accept(incl, a)
-    np.testing.assert_allclose(incl, [2.0, 1.0], rtol=1e-15)
+    np.testing.assert_allclose(incl[:3], [2.0, 1.0, 5.0], rtol=1e-15)
     assert kf.mag_inclination(incl, b) == pytest.approx(2.0, rel=1e-15)
+    assert kf.mag_horizontal(incl, b) == pytest.approx(5.0, rel=1e-15)
     kf.mag_accept(incl, b)
-    np.testing.assert_allclose(incl, [2.5, 2.0], rtol=1e-15)
+    np.testing.assert_allclose(incl[:3], [2.5, 2.0, 7.0], rtol=1e-15)
     assert kf.mag_inclination(incl, c) == pytest.approx(1.25, rel=1e-15)
+    assert kf.mag_horizontal(incl, c) == pytest.approx(3.5, rel=1e-15)
 
 
 def test_mag_heading_with_declination() -> None:
@@ -827,14 +835,15 @@ def test_mag_heading_with_declination() -> None:
     of D (its noise, or a heading error) and its own tan I is tan 60 deg; H follows D and the tan I given."""
     inc, dec = 60.0 * DEG, 10.0 * DEG
     m_n = 48.0 * np.array([math.cos(inc) * math.cos(dec), math.cos(inc) * math.sin(dec), math.sin(inc)])
-    nu, H, R = kf.mag_heading(m_n, dec - 0.05, 1.7, 0.02)
+    s = state()
+    nu, H, R = kf.mag_heading(s, m_n, dec - 0.05, 1.7, 24.0, 0.02)
     assert nu[0] == pytest.approx(0.05, rel=1e-12, abs=0)
-    He = np.zeros((1, 22))
+    He = np.zeros((1, em.NX))
     He[0, 0:3] = [-1.7 * math.cos(dec - 0.05), -1.7 * math.sin(dec - 0.05), 1.0]
-    np.testing.assert_allclose(H, He, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(H[:, : em.X_MB], He[:, : em.X_MB], rtol=0, atol=1e-15)
     np.testing.assert_allclose(R, [[0.0004]], rtol=1e-15, atol=0)
     # wrapped: a declination of 10 deg against a field seen at 10 deg - 2 pi + 0.1
-    nu, _, _ = kf.mag_heading(m_n, dec + 2 * math.pi - 0.1, 1.7, 0.02)
+    nu, _, _ = kf.mag_heading(s, m_n, dec + 2 * math.pi - 0.1, 1.7, 24.0, 0.02)
     assert nu[0] == pytest.approx(0.1, rel=1e-12, abs=0)
 
 
@@ -850,18 +859,19 @@ def test_mag_heading_noise_does_not_move_the_tilt_on_average() -> None:
     m_n = 48.0 * np.array([math.cos(inc) * math.cos(dec), math.cos(inc) * math.sin(dec), math.sin(inc)])
     c_nb = cbn(*ATT).T
     sigma = 0.3 / (48.0 * math.cos(inc))
-    P0 = np.diag(np.r_[np.array([0.05, 0.05, 0.1]) * DEG, np.full(19, 1e-2)] ** 2)
+    P0 = np.diag(np.r_[np.array([0.05, 0.05, 0.1]) * DEG, np.full(em.NX - 3, 1e-2)] ** 2)
     rng = np.random.default_rng(7)
     n = 4000
-    dx = np.empty((n, 22))
+    dx = np.empty((n, em.NX))
     for k in range(n):
         m_b = c_nb @ m_n + 0.3 * rng.standard_normal(3)
-        nu, H, R = kf.mag_heading(kf.mag_level(s, CFG, m_b, np.zeros(3), 0.0), dec, math.tan(inc), sigma)
-        x = np.zeros(22)
+        nu, H, R = kf.mag_heading(s, kf.mag_level(s, CFG, NO_BIAS, m_b, np.zeros(3), 0.0), dec, math.tan(inc),
+                                  48.0 * math.cos(inc), sigma)
+        x = np.zeros(em.NX)
         kf.update(x, P0.copy(), H, nu, R, 0.0, kf.ALL)
         dx[k] = x
     se = dx.std(axis=0, ddof=1) / math.sqrt(n)
-    z = np.divide(dx.mean(axis=0), se, out=np.zeros(22), where=se > 0)
+    z = np.divide(dx.mean(axis=0), se, out=np.zeros(em.NX), where=se > 0)
     assert np.all(np.abs(z) < 4.5), z
     assert np.all(dx[:, 3:9] == 0.0) and np.all(dx[:, 12:15] == 0.0)  # uncorrelated with the heading: no gain
 
@@ -915,7 +925,7 @@ def test_zupt() -> None:
     s = state()
     nu, H, R = kf.zupt(s, 0.02)
     np.testing.assert_array_equal(nu, V0)
-    He = np.zeros((3, 22))
+    He = np.zeros((3, em.NX))
     He[:, 3:6] = np.eye(3)
     np.testing.assert_array_equal(H, He)
     np.testing.assert_array_equal(R, np.eye(3) * 0.0004)
@@ -935,7 +945,7 @@ def test_zaru() -> None:
     nu, H, R = kf.zaru(s, CFG, bias, w_raw, 1e-4)
     b = np.array([1.4e-3, -1.5e-3, 2.4e-3])
     np.testing.assert_allclose(nu, b - (w_raw - c.T @ w_ie), rtol=0, atol=4e-18)
-    He = np.zeros((3, 22))
+    He = np.zeros((3, em.NX))
     He[:, 0:3] = c.T @ skew(w_ie)
     He[:, 9:12] = He[:, 15:18] = np.eye(3)
     np.testing.assert_allclose(H, He, rtol=0, atol=1e-19)
@@ -949,31 +959,39 @@ def test_zaru() -> None:
 def test_initial_covariance() -> None:
     """Diagonal: position, velocity, level, yaw, the spec's bias sigmas, baro offset (kalman docstring)."""
     spec = em.ImuSpec(gyro_bias=2.0, gyro_gm=3.0, gyro_tau=1.0, accel_bias=5.0, accel_gm=7.0, accel_tau=1.0).as_array()
-    P = kf.initial_covariance(spec, 10.0, 0.5, 0.25, 4.0, 6.0)
+    P = kf.initial_covariance(spec, 10.0, 0.5, 0.25, 4.0, 6.0, 0.0)
     d = np.array([0.0625, 0.0625, 16.0] + [0.25] * 3 + [100.0] * 3 + [4.0] * 3 + [25.0] * 3 + [9.0] * 3 + [49.0] * 3
-                 + [36.0])
+                 + [36.0] + [0.0] * 9)
     np.testing.assert_array_equal(P, np.diag(d))
+    # the scale factors take the spec's 1-sigma, the hard iron the sigma passed in
+    spec = em.ImuSpec(gyro_scale=2e-3, accel_scale=3e-3).as_array()
+    P = kf.initial_covariance(spec, 10.0, 0.5, 0.25, 4.0, 6.0, 0.5)
+    np.testing.assert_allclose(np.diag(P)[22:], [4e-6] * 3 + [9e-6] * 3 + [0.25] * 3, rtol=1e-15)
 
 
 def test_module_level_layout() -> None:
     """The constants mutmut does not mutate (module level), pinned by value: the state layout of docs/filter.md
     "State", the process-model vector of errmodel's docstring, and the bias vector of kalman's docstring."""
     assert (em.X_PHI, em.X_DV, em.X_DP, em.X_BG, em.X_BA, em.X_GG, em.X_GA, em.X_BARO) == (0, 3, 6, 9, 12, 15, 18, 21)
-    assert em.NX == 22 and em.N_CONTRACT == 15
+    assert (em.X_SG, em.X_SA, em.X_MB) == (22, 25, 28)
+    assert em.NX == 31 and em.N_CONTRACT == 15
     assert (em.SP_GYRO_ARW, em.SP_GYRO_BIAS, em.SP_GYRO_GM, em.SP_GYRO_TAU, em.SP_GYRO_RRW, em.SP_ACC_VRW,
-            em.SP_ACC_BIAS, em.SP_ACC_GM, em.SP_ACC_TAU, em.SP_ACC_RRW, em.SP_BARO_DRIFT) == tuple(range(11))
-    assert (kf.B_BG, kf.B_BA, kf.B_GG, kf.B_GA, kf.B_BARO, kf.B_SIZE) == (0, 3, 6, 9, 12, 13)
-    np.testing.assert_array_equal(kf.ALL, np.ones(22))
-    np.testing.assert_array_equal(kf.ALL_BUT_HEADING, np.r_[1.0, 1.0, 0.0, np.ones(19)])  # phi_D held back
+            em.SP_ACC_BIAS, em.SP_ACC_GM, em.SP_ACC_TAU, em.SP_ACC_RRW, em.SP_BARO_DRIFT, em.SP_GYRO_SCALE,
+            em.SP_ACC_SCALE, em.SP_SIZE) == tuple(range(14))
+    assert (kf.B_BG, kf.B_BA, kf.B_GG, kf.B_GA, kf.B_BARO, kf.B_SG, kf.B_SA, kf.B_MB, kf.B_SIZE) == \
+        (0, 3, 6, 9, 12, 13, 16, 19, 22)
+    np.testing.assert_array_equal(kf.ALL, np.ones(em.NX))
+    np.testing.assert_array_equal(kf.ALL_BUT_HEADING, np.r_[1.0, 1.0, 0.0, np.ones(em.NX - 3)])  # phi_D held back
 
 
 def test_the_state_is_declared_once() -> None:
     """errmodel.STATE is the one declaration: its blocks in the order and sizes of docs/filter.md "State",
     each X_<NAME> its running offset, NX their sum, the sensor errors (kept as estimates by the feedback)
-    the five blocks from the gyro bias on, and kalman's bias vector those blocks at the same places."""
+    the blocks from the gyro bias on, and kalman's bias vector those blocks at the same places."""
     assert [(b.name, b.size) for b in em.STATE] == [("PHI", 3), ("DV", 3), ("DP", 3), ("BG", 3), ("BA", 3),
-                                                    ("GG", 3), ("GA", 3), ("BARO", 1)]
-    assert [b.name for b in em.STATE if b.sensor] == ["BG", "BA", "GG", "GA", "BARO"]
+                                                    ("GG", 3), ("GA", 3), ("BARO", 1), ("SG", 3), ("SA", 3),
+                                                    ("MB", 3)]
+    assert [b.name for b in em.STATE if b.sensor] == ["BG", "BA", "GG", "GA", "BARO", "SG", "SA", "MB"]
     assert em.X_SENSORS == 9 and kf.B_SIZE == em.NX - em.X_SENSORS
     for b in em.STATE:
         assert getattr(em, f"X_{b.name}") == em.OFFSET[b.name]

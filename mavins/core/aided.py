@@ -11,12 +11,16 @@ measurement stamped at or before the update's time (kalman.py, late-fix rule
 there), write one output row.
 
 Output row (kernel units; :func:`to_file_units` gives the contract's file
-units), 35 columns: the 14 solution columns of strapdown.solution_row
+units), ROW_SIZE columns: the 14 solution columns of strapdown.solution_row
 (radians), then the 1-sigma of the filter ``sigma_n,e,d`` (m),
 ``sigma_vn,ve,vd`` (m/s), ``sigma_att_n,e,d`` (rad, of phi), the bias
 estimates ``bg_x,y,z`` (rad/s), ``ba_x,y,z`` (m/s^2) and their 1-sigma
-``sigma_bg_x,y,z``, ``sigma_ba_x,y,z``. A bias and its sigma are those of
-the sum of the constant and the Gauss-Markov parts (errmodel.py).
+``sigma_bg_x,y,z``, ``sigma_ba_x,y,z`` (these 35 are the contract's,
+OUT_COLUMNS). A bias and its sigma are those of the sum of the constant and
+the Gauss-Markov parts (errmodel.py). Then, for each block of STATE_BLOCKS
+(gyro and accelerometer scale factor, magnetometer hard iron), its estimate
+and 1-sigma (``sg_x ... sigma_sg_x ...``): a solution file carries them
+where the filter estimates them (:func:`file_columns`).
 
 Measurement rows (kernel units, each sorted by time; rows before the start
 are skipped):
@@ -26,8 +30,12 @@ are skipped):
   when vn, ve, vd are;
 * baro ``t, h (m), sigma (m)``: h is barometric height with an unknown
   offset the filter estimates (state X_BARO);
-* mag ``t, mx, my, mz (body FRD, calibrated, any unit), sigma (rad)``:
-  heading through kalman.mag_heading with the given declination;
+* mag ``t, mx, my, mz (body FRD, any unit), sigma (rad)``: heading through
+  kalman.mag_heading with the given declination, less the hard-iron
+  estimate (state X_MB, estimated when its initial sigma is above 0); a
+  sample whose inclination disagrees with the model's (``mag_model``) by
+  more than MAG_INCL_GATE is counted disturbed (kind ``mag_disturbed``) and
+  not applied (:func:`apply_mag`, the live path's too);
 * static ``t0, t1, sigma_v (m/s), sigma_w (rad/s)``: at rest in [t0, t1]:
   a ZUPT at every attitude update inside, and at the first update at or
   after t1 a ZARU with the mean raw gyro rate of the IMU rows inside
@@ -60,7 +68,8 @@ K_BARO = 2
 K_MAG = 3
 K_ZUPT = 4
 K_ZARU = 5
-KIND_NAMES = ("gnss_pos", "gnss_vel", "baro", "mag", "zupt", "zaru")
+K_MAG_DISTURBED = 6
+KIND_NAMES = ("gnss_pos", "gnss_vel", "baro", "mag", "zupt", "zaru", "mag_disturbed")
 
 GNSS_COLUMNS = ("t", "lat", "lon", "h", "vn", "ve", "vd", "sigma_h", "sigma_v", "sigma_vel")
 BARO_COLUMNS = ("t", "h", "sigma")
@@ -79,6 +88,14 @@ FILTER_COLUMNS = (
 )  # fmt: skip
 OUT_COLUMNS = sd.OUT_COLUMNS + FILTER_COLUMNS
 OUT_SIZE = len(OUT_COLUMNS)  # 35: the contract's 14 solution and 21 filter columns
+STATE_BLOCKS = ("SG", "SA", "MB")  # errmodel.STATE blocks written after the contract's columns, where estimated
+STATE_COLUMNS = tuple(f"{p}{b.lower()}_{a}" for b in STATE_BLOCKS for p in ("", "sigma_") for a in "xyz")
+ROW_COLUMNS = OUT_COLUMNS + STATE_COLUMNS
+ROW_SIZE = len(ROW_COLUMNS)
+ACC_SIZE = 19  # the pending propagation: sum C T (9), f^n T (3), T, angle and velocity increments (body, 3 + 3)
+MAG_INCL_GATE = math.radians(20.0)  # rad: a sample whose inclination differs more from the model's is disturbed
+MAG_RESET_AFTER = 50  # consecutive rejected magnetometer samples after which the hard iron is reset (apply_mag)
+MAG_STRENGTH_GATE = 0.2  # gauss: likewise for its strength (PX4 EKF2_MAG_CHK_STR), in the sample's unit where it is known
 
 DEFAULT_SIGMA_H = 2.5  # m (docs/conventions.md GNSS file)
 DEFAULT_SIGMA_V = 5.0  # m
@@ -91,8 +108,11 @@ _DEG_H = math.degrees(1.0) * 3600.0  # rad/s -> deg/h
 
 @kernel
 def _propagate(s: np.ndarray, cfg: np.ndarray, spec: np.ndarray, P: np.ndarray, acc: np.ndarray, frame: int) -> None:
-    """Propagate P over the pending interval ``acc[12]`` with its mean C (acc[0:9]) and f^n (acc[9:12])."""
+    """Propagate P over the pending interval ``acc[12]`` with its mean C (acc[0:9]), f^n (acc[9:12]), body
+    rate and specific force (acc[13:16], acc[16:19]: increments summed over the interval)."""
     literally(frame)
+    if acc.shape[0] < ACC_SIZE or P.shape[0] != NX or P.shape[1] != NX:
+        raise ValueError("the propagation needs acc of ACC_SIZE values and P of NX x NX")
     T = acc[12]
     if not T > 0.0:
         return
@@ -103,9 +123,10 @@ def _propagate(s: np.ndarray, cfg: np.ndarray, spec: np.ndarray, P: np.ndarray, 
     f_n = acc[9:12] / T
     lat, lon, h = sd.position(s, cfg, frame)
     F = em.system_matrix(c, s[sd.S_V : sd.S_V + 3], lat, h, f_n, spec, cfg[sd.CFG_EARTH] > 0.5)
+    em.scale_factor_columns(F, c, acc[13:16] / T, acc[16:19] / T, spec)
     phi, qd = em.discretise(F, spec, T)
     kf.predict(P, phi, qd)
-    for i in range(13):
+    for i in range(ACC_SIZE):
         acc[i] = 0.0
 
 
@@ -141,6 +162,7 @@ def after_k_update(s: np.ndarray, cfg: np.ndarray, spec: np.ndarray, P: np.ndarr
         acc[a] += c[a] * T
     acc[12] += T
     for a in range(6):
+        acc[13 + a] += sums[a]
         sums[a] = 0.0
     if spec[em.SP_GYRO_GM] > 0.0:
         e = np.exp(-T / spec[em.SP_GYRO_TAU])
@@ -159,25 +181,25 @@ def after_k_update(s: np.ndarray, cfg: np.ndarray, spec: np.ndarray, P: np.ndarr
 def push_rate_aided(s: np.ndarray, cfg: np.ndarray, spec: np.ndarray, P: np.ndarray, bias: np.ndarray,
                     acc: np.ndarray, sums: np.ndarray, t: float, wx: float, wy: float, wz: float, fx: float,
                     fy: float, fz: float, predict_every: int, frame: int) -> int:
-    """The live path: one rate sample (rad/s, m/s^2, FRD) with the bias estimates subtracted,
+    """The live path: one rate sample (rad/s, m/s^2, FRD) corrected by the estimates (kalman.correct_gyro),
     through strapdown.push_rate_scalars, then :func:`after_k_update` when it completed a k
     update. Same return codes and ``frame`` as push_rate_scalars."""
     literally(frame)
     dt = t - s[sd.S_TJ]
-    bgx, bgy, bgz = bias[kf.B_BG] + bias[kf.B_GG], bias[kf.B_BG + 1] + bias[kf.B_GG + 1], \
-        bias[kf.B_BG + 2] + bias[kf.B_GG + 2]
-    bax, bay, baz = bias[kf.B_BA] + bias[kf.B_GA], bias[kf.B_BA + 1] + bias[kf.B_GA + 1], \
-        bias[kf.B_BA + 2] + bias[kf.B_GA + 2]
-    r = sd.push_rate_scalars(s, cfg, t, wx - bgx, wy - bgy, wz - bgz, fx - bax, fy - bay, fz - baz, frame)
+    cwx, cwy, cwz = kf.correct_gyro(bias, 0, wx, 1.0), kf.correct_gyro(bias, 1, wy, 1.0), \
+        kf.correct_gyro(bias, 2, wz, 1.0)
+    cfx, cfy, cfz = kf.correct_accel(bias, 0, fx, 1.0), kf.correct_accel(bias, 1, fy, 1.0), \
+        kf.correct_accel(bias, 2, fz, 1.0)
+    r = sd.push_rate_scalars(s, cfg, t, cwx, cwy, cwz, cfx, cfy, cfz, frame)
     if r < 0:
         return r
     if dt > 0.0:
-        sums[0] += (wx - bgx) * dt
-        sums[1] += (wy - bgy) * dt
-        sums[2] += (wz - bgz) * dt
-        sums[3] += (fx - bax) * dt
-        sums[4] += (fy - bay) * dt
-        sums[5] += (fz - baz) * dt
+        sums[0] += cwx * dt
+        sums[1] += cwy * dt
+        sums[2] += cwz * dt
+        sums[3] += cfx * dt
+        sums[4] += cfy * dt
+        sums[5] += cfz * dt
     if r == 1:
         after_k_update(s, cfg, spec, P, bias, acc, sums, predict_every, frame)
     return r
@@ -204,8 +226,69 @@ def _record(
 
 
 @kernel
+def apply_mag(s: np.ndarray, cfg: np.ndarray, bias: np.ndarray, P: np.ndarray, incl: np.ndarray, m_b: np.ndarray,
+              w_ib: np.ndarray, late: float, declination: float, sigma: float, incl_model: float,
+              strength_model: float, strength_gate: float, gate: float, free: np.ndarray) -> tuple[int, float, float]:
+    """One magnetometer sample (body FRD) taken ``late`` s before the solution, for the batch and the live
+    path alike: less the hard-iron estimate, levelled (kalman.mag_level); checked against the Earth model's
+    inclination (rad) with MAG_INCL_GATE and its strength (the sample's unit) with ``strength_gate`` (same
+    unit) (kalman.mag_disturbed; NaN: not checked), both widened by the hard iron's 3 sigma (the largest
+    axis; on the inclination over the model's strength); then the heading update (kalman.mag_heading) at the
+    model's field: its tan I, and its horizontal strength ``F cos I`` for the hard-iron column; without a
+    model figure, the running means ``incl`` of the accepted samples (kalman.MAG_STATS), which an accepted
+    sample joins. After MAG_RESET_AFTER rejections in a row the hard iron's covariance is reset to its
+    initial variance ``incl[4]`` (none when 0). Returns ``(status, nis, ratio)``: status 1 accepted, 0
+    rejected by the gate, -1 disturbed (not applied).
+    """
+    m_n = kf.mag_level(s, cfg, bias, m_b, w_ib, late)
+    # the checks allow for the hard iron not learnt yet: 3 sigma of its largest axis on the strength, and
+    # that over the model's strength on the inclination
+    hard = 0.0
+    for i in range(3):
+        hard = max(hard, 3.0 * np.sqrt(max(P[em.X_MB + i, em.X_MB + i], 0.0)))
+    gate_incl = MAG_INCL_GATE
+    if np.isfinite(strength_model) and strength_model > 0.0:
+        gate_incl += np.arctan(hard / strength_model)
+    if kf.mag_disturbed(m_n, incl_model, strength_model if np.isfinite(strength_gate) else np.nan, gate_incl,
+                        strength_gate + hard):
+        return -1, np.nan, np.nan
+    tan_i = np.tan(incl_model) if np.isfinite(incl_model) else kf.mag_inclination(incl, m_n)
+    if np.isfinite(incl_model) and np.isfinite(strength_model):
+        horizontal = strength_model * np.cos(incl_model)
+    else:
+        horizontal = kf.mag_horizontal(incl, m_n)
+    nu, H, R = kf.mag_heading(s, m_n, declination, tan_i, horizontal, sigma)
+    nis, ratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate, free)
+    if ok:
+        kf.mag_accept(incl, m_n)
+        incl[3] = 0.0
+        return 1, nis, ratio
+    incl[3] += 1.0
+    if incl[3] >= MAG_RESET_AFTER and incl[4] > 0.0:
+        # persistently rejected with a hard iron estimated: a wrong early estimate (the heading's
+        # nonlinearity in a large hard iron) holds the gate shut; forget it (its prior, no correlation),
+        # as PX4 EKF2 resets its magnetometer states
+        for i in range(3):
+            j = em.X_MB + i
+            for k in range(P.shape[0]):
+                P[j, k] = 0.0
+                P[k, j] = 0.0
+            P[j, j] = incl[4]
+        incl[3] = 0.0
+    return 0, nis, ratio
+
+
+@kernel
 def filter_row(P: np.ndarray, bias: np.ndarray, out: np.ndarray) -> None:
-    """Write the 21 filter columns (kernel units) after the 14 solution columns of ``out``."""
+    """Write the filter's columns (kernel units) after the 14 solution columns of ``out``: the contract's
+    21, then, when ``out`` has ROW_SIZE values, each STATE_BLOCKS block's estimate and 1-sigma."""
+    k = OUT_SIZE
+    if out.shape[0] >= ROW_SIZE:  # a row of the contract's 35 columns only has no room for them
+        for x0 in (em.X_SG, em.X_SA, em.X_MB):
+            for i in range(3):
+                out[k + i] = bias[x0 - em.X_SENSORS + i]
+                out[k + 3 + i] = np.sqrt(max(P[x0 + i, x0 + i], 0.0))
+            k += 6
     for i in range(3):
         out[14 + i] = np.sqrt(P[em.X_DP + i, em.X_DP + i])
         out[17 + i] = np.sqrt(P[em.X_DV + i, em.X_DV + i])
@@ -232,6 +315,9 @@ def run_aided(
     spec: np.ndarray,
     lever: np.ndarray,
     declination: float,
+    mag_incl: float,
+    mag_strength: float,
+    mag_strength_gate: float,
     gate: float,
     predict_every: int,
     P: np.ndarray,
@@ -248,15 +334,21 @@ def run_aided(
     and can be passed to a following call over the next rows; measurement
     rows at or before the state's last update are then skipped (a fresh
     state uses those at its own time), and a rest interval must lie within
-    one call.
+    one call. ``mag_incl`` (rad) and ``mag_strength`` (the magnetometer's
+    unit) are the Earth model's field, ``mag_strength_gate`` the strength
+    check in that unit (NaN: none; :func:`apply_mag`).
     ``out`` needs ``len(t) // N``
-    rows of OUT_SIZE; ``counts`` is (6, 2) accepted/rejected per kind
+    rows of ROW_SIZE; ``counts`` is (7, 2) accepted/rejected per kind
     (KIND_NAMES), ``log`` (L, 6) receives ``t, kind, nis, dof, accepted,
     ratio`` per measurement while it has room. ``p_hist`` (H, NX, NX)
     receives P after every ``p_every``-th output row (rows p_every - 1,
     2 p_every - 1, ...) while it has room; pass an empty array to skip. Row
     layouts in the module docstring.
     """
+    if out.shape[1] < ROW_SIZE or counts.shape[0] < len(KIND_NAMES) or (log.shape[0] > 0 and log.shape[1] < 6) \
+            or P.shape[0] != NX or P.shape[1] != NX or bias.shape[0] != kf.B_SIZE:
+        raise ValueError("run_aided: out needs ROW_SIZE columns, counts a row per kind, log 6 columns, P NX x NX, "
+                         "bias B_SIZE values")
     t_start = s[sd.S_T]
     cont = s[sd.S_NK] > 0.0  # a continued run: rows at its time were used by the call before
     ig = 0
@@ -272,7 +364,7 @@ def run_aided(
     while iz < static.shape[0] and static[iz, 1] < t_start:
         iz += 1
     gm_g = spec[em.SP_GYRO_GM] > 0.0
-    acc = np.zeros(13)
+    acc = np.zeros(ACC_SIZE)
     sums = np.zeros(7)
     sums[6] = s[sd.S_T]
     raw_sum = np.zeros(3)
@@ -282,7 +374,8 @@ def run_aided(
     w_ib = np.zeros(3)
     v_m = np.empty(3)
     m_b = np.empty(3)
-    incl = np.zeros(2)  # sum and count of tan(inclination) of the accepted magnetometer samples
+    incl = np.zeros(kf.MAG_STATS)  # running sums over the accepted magnetometer samples (apply_mag)
+    incl[4] = P[em.X_MB, em.X_MB]
     n_out = 0
     n_log = 0
     for i in range(t.shape[0]):
@@ -290,8 +383,8 @@ def run_aided(
         if not dt > 0.0:
             continue
         for a in range(3):
-            dth_c[a] = dtheta[i, a] - (bias[kf.B_BG + a] + bias[kf.B_GG + a]) * dt
-            dv_c[a] = dv[i, a] - (bias[kf.B_BA + a] + bias[kf.B_GA + a]) * dt
+            dth_c[a] = kf.correct_gyro(bias, a, dtheta[i, a], dt)
+            dv_c[a] = kf.correct_accel(bias, a, dv[i, a], dt)
             sums[a] += dth_c[a]
             sums[3 + a] += dv_c[a]
         if iz < static.shape[0] and static[iz, 0] < t[i] <= static[iz, 1]:
@@ -331,12 +424,13 @@ def run_aided(
             _propagate(s, cfg, spec, P, acc, GEOGRAPHIC)
             m_b[0], m_b[1], m_b[2] = mag[im, 1], mag[im, 2], mag[im, 3]
             if np.isfinite(m_b[0]) and np.isfinite(m_b[1]) and np.isfinite(m_b[2]):
-                m_n = kf.mag_level(s, cfg, m_b, w_ib, tk - mag[im, 0])
-                nu, H, R = kf.mag_heading(m_n, declination, kf.mag_inclination(incl, m_n), mag[im, 4])
-                nis, ratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate, kf.ALL)
-                n_log = _record(log, n_log, counts, mag[im, 0], K_MAG, 1, nis, ratio, ok)
-                if ok:
-                    kf.mag_accept(incl, m_n)
+                status, nis, ratio = apply_mag(s, cfg, bias, P, incl, m_b, w_ib, tk - mag[im, 0], declination,
+                                               mag[im, 4], mag_incl, mag_strength, mag_strength_gate, gate,
+                                               kf.ALL)
+                if status < 0:
+                    counts[K_MAG_DISTURBED, 1] += 1
+                else:
+                    n_log = _record(log, n_log, counts, mag[im, 0], K_MAG, 1, nis, ratio, status == 1)
             im += 1
         while iz < static.shape[0] and static[iz, 0] <= tk:
             if tk <= static[iz, 1]:
@@ -398,17 +492,35 @@ def _columns(rows: Any, width: int, defaults: Sequence[float], name: str) -> np.
     return np.ascontiguousarray(out)
 
 
-def to_file_units(rows: np.ndarray) -> np.ndarray:
-    """Aided rows in kernel units to the contract's file units.
+def unit_factors(columns: Sequence[str]) -> np.ndarray:
+    """Per column of a solution row, the factor from kernel to file units: degrees for lat, lon, the Euler
+    angles and sigma_att; deg/h for the gyro bias and its sigma; ppm for the scale factors and their
+    sigma; 1 for everything else."""
+    deg = math.degrees(1.0)
+    by_name = {n: deg for n in ("lat", "lon", "roll", "pitch", "yaw", "sigma_att_n", "sigma_att_e", "sigma_att_d")}
+    for a in "xyz":
+        by_name[f"bg_{a}"] = by_name[f"sigma_bg_{a}"] = _DEG_H
+        for blk in ("sg", "sa"):
+            by_name[f"{blk}_{a}"] = by_name[f"sigma_{blk}_{a}"] = 1e6
+    return np.array([by_name.get(n, 1.0) for n in columns])
 
-    Degrees for lat, lon, Euler angles and sigma_att; deg/h for the gyro bias
-    and its sigma; everything else unchanged.
-    """
-    out = rows.copy()
-    out[:, [1, 2, 7, 8, 9, 20, 21, 22]] = np.degrees(out[:, [1, 2, 7, 8, 9, 20, 21, 22]])
-    out[:, 23:26] *= _DEG_H
-    out[:, 29:32] *= _DEG_H
-    return out
+
+def to_file_units(rows: np.ndarray, columns: Sequence[str] | None = None) -> np.ndarray:
+    """Aided rows in kernel units to the contract's file units (:func:`unit_factors`); ``columns``
+    names the rows' columns (default: the first of ROW_COLUMNS)."""
+    names = ROW_COLUMNS[: rows.shape[1]] if columns is None else columns
+    return rows * unit_factors(names)
+
+
+def file_columns(spec: np.ndarray, mag_bias: float) -> np.ndarray:
+    """The indices into a ROW_SIZE row of a solution file's columns: the contract's 35, then the
+    scale-factor blocks the spec estimates (errmodel SP_*_SCALE > 0) and the hard iron when its initial
+    1-sigma ``mag_bias`` is above 0 (docs/filter.md)."""
+    idx = list(range(OUT_SIZE))
+    for k, on in enumerate((spec[em.SP_GYRO_SCALE] > 0.0, spec[em.SP_ACC_SCALE] > 0.0, mag_bias > 0.0)):
+        if on:
+            idx += range(OUT_SIZE + 6 * k, OUT_SIZE + 6 * k + 6)
+    return np.array(idx, dtype=np.int64)
 
 
 def navigate_aided(
@@ -425,6 +537,11 @@ def navigate_aided(
     samples: int = 2,
     predict_every: int = 1,
     declination: float = 0.0,
+    mag_inclination: float | None = None,
+    mag_strength: float | None = None,
+    mag_strength_gate: float | None = None,
+    mag_bias: float = 0.0,
+    scale_factors: bool = False,
     baro_offset_sigma: float = 50.0,
     baro_drift: float = 0.0,
     covariance_every: int = 0,
@@ -453,6 +570,12 @@ def navigate_aided(
         samples: samples per attitude update (strapdown N).
         predict_every: attitude updates per covariance propagation.
         declination: magnetic declination (deg, east positive).
+        mag_inclination: the Earth model's inclination (deg): the disturbance check and the heading's model;
+            None: no check, the samples' mean.
+        mag_strength: the model's strength in the samples' unit (the hard iron's model); None: their mean.
+        mag_strength_gate: the strength check in that unit (aided.MAG_STRENGTH_GATE gauss); None: none.
+        mag_bias: initial 1-sigma of the magnetometer's hard iron per axis (its unit); 0: not estimated.
+        scale_factors: estimate a grade's scale factors (errmodel.spec_of; spec keys give theirs anyway).
         baro_offset_sigma: initial 1-sigma of the baro offset (m).
         baro_drift: random walk of the baro offset (m/sqrt(s)).
         covariance_every: keep the full P after every this many output rows
@@ -461,7 +584,7 @@ def navigate_aided(
         options: other strapdown.make_config options.
 
     Returns:
-        ``(rows, stats)``: (M, 35) output rows, and ``counts`` (kind ->
+        ``(rows, stats)``: (M, ROW_SIZE) output rows (:func:`file_columns` picks a file's), and ``counts`` (kind ->
         (accepted, rejected)), ``nis`` (log rows, LOG_COLUMNS), ``P`` (final),
         ``bias`` (kalman.B_* layout), ``baro_offset`` (m), ``P_history``,
         ``state`` (s).
@@ -469,7 +592,7 @@ def navigate_aided(
     cfg = sd.make_config(samples=samples, **options)
     if predict_every < 1:
         raise ValueError("predict_every must be >= 1")
-    sp = em.make_spec(spec, baro_drift)
+    sp = em.make_spec(spec, baro_drift, scale_factors)
     s = initial_state(init)
     imu = np.asarray(imu, dtype=np.float64)
     if imu.ndim != 2 or imu.shape[1] != 7:
@@ -493,11 +616,12 @@ def navigate_aided(
         math.radians(float(init.get("sigma_level", 1.0))),
         math.radians(float(init.get("sigma_yaw", 10.0))),
         float(baro_offset_sigma),
+        float(mag_bias),
     )
     bias = np.zeros(kf.B_SIZE)
     lever = np.asarray(lever_arm, dtype=np.float64).reshape(3)
     n_out = t.shape[0] // int(cfg[sd.CFG_SAMPLES]) + 1
-    out = np.empty((n_out, OUT_SIZE))
+    out = np.empty((n_out, ROW_SIZE))
     counts = np.zeros((len(KIND_NAMES), 2), dtype=np.int64)
     # one row per fix, baro, mag and attitude update (ZUPT), and per rest window a ZARU and the second
     # ZUPT of an update shared by two windows (one ends where the next starts)
@@ -507,7 +631,10 @@ def navigate_aided(
     p_every = int(covariance_every) if covariance_every > 0 else n_out + 1
     p_hist = np.zeros((n_out // p_every if covariance_every > 0 else 0, NX, NX))
     rows, n_log = run_aided(
-        s, cfg, t, dth, dvel, g, b, m, z, sp, lever, math.radians(declination), float(gate), int(predict_every),
+        s, cfg, t, dth, dvel, g, b, m, z, sp, lever, math.radians(declination),
+        math.nan if mag_inclination is None else math.radians(mag_inclination),
+        math.nan if mag_strength is None else float(mag_strength),
+        math.nan if mag_strength_gate is None else float(mag_strength_gate), float(gate), int(predict_every),
         P, bias, out, counts, log, p_hist, p_every,
     )
     result = out[:rows]
@@ -532,7 +659,11 @@ __all__ = [
     "NX",
     "OUT_COLUMNS",
     "OUT_SIZE",
+    "ROW_COLUMNS",
+    "ROW_SIZE",
     "STATIC_COLUMNS",
+    "apply_mag",
+    "file_columns",
     "filter_row",
     "navigate_aided",
     "run_aided",

@@ -13,12 +13,13 @@ over steps of T seconds as
 zero navigation error (every run starts from the true initial state) and the
 sensors' random constants at their 1-sigma.
 
-The analysis augments the filter's 22 states (errmodel.py) with the scale
-factor and misalignment of each triad as random constants (18 states, for the
-analysis only, so the live filter does not carry them):
+The analysis augments the filter's NX = 31 states (errmodel.py) with the
+scale factor and misalignment of each triad as random constants (18 states,
+for the analysis only; the filter's own scale-factor states stay at zero
+here, and the live filter does not carry misalignment):
 
-    x[22:31]  K_g  gyro error matrix, row-major: K[i, j] at 22 + 3 i + j
-    x[31:40]  K_a  accelerometer error matrix, likewise
+    x[31:40]  K_g  gyro error matrix, row-major: K[i, j] at 31 + 3 i + j
+    x[40:49]  K_a  accelerometer error matrix, likewise
 
 ``measured = (I + K) true + bias``: the diagonal of K is the scale-factor
 error, the off-diagonal terms the misalignment / non-orthogonality (sim/errors.py
@@ -68,8 +69,9 @@ NA = em.NX + 18
 ARCSEC = math.pi / 180.0 / 3600.0
 PPM = 1e-6
 
-ANALYSIS_KEYS = ("gyro_scale", "accel_scale", "gyro_misalignment", "accel_misalignment")
-"""Spec keys of the error analysis beyond errmodel.SPEC_KEYS: ppm and arcsec, 1-sigma (docs/conventions.md)."""
+ANALYSIS_KEYS = ("gyro_misalignment", "accel_misalignment")
+"""Spec keys of the error analysis beyond errmodel.SPEC_KEYS (which has the scale factors): arcsec, 1-sigma
+(docs/conventions.md)."""
 
 SOURCES = (
     "gyro_bias", "gyro_instability", "gyro_rate_random_walk", "gyro_random_walk", "gyro_scale", "gyro_misalignment",
@@ -111,10 +113,11 @@ class AnalysisSpec:
 
 def spec_from_keys(keys: Mapping[str, float]) -> AnalysisSpec:
     """AnalysisSpec from the contract's keys: errmodel.SPEC_KEYS plus ANALYSIS_KEYS (ppm, arcsec); absent = 0."""
+    imu = em.spec_from_keys(keys)
     return AnalysisSpec(
-        em.spec_from_keys(keys),
-        gyro_scale=float(keys.get("gyro_scale", 0.0)) * PPM,
-        accel_scale=float(keys.get("accel_scale", 0.0)) * PPM,
+        imu,
+        gyro_scale=imu.gyro_scale,
+        accel_scale=imu.accel_scale,
         gyro_misalignment=float(keys.get("gyro_misalignment", 0.0)) * ARCSEC,
         accel_misalignment=float(keys.get("accel_misalignment", 0.0)) * ARCSEC,
     )
@@ -123,10 +126,11 @@ def spec_from_keys(keys: Mapping[str, float]) -> AnalysisSpec:
 def spec_from_grade(name: str) -> AnalysisSpec:
     """AnalysisSpec of a grade (core/grades.py); its scale-factor and misalignment magnitudes are taken as 1-sigma."""
     f = grades.grade_figures(name)
+    imu = em.spec_from_grade(name, scale_factors=True)
     return AnalysisSpec(
-        em.spec_from_grade(name),
-        gyro_scale=f.gyro.scale_factor_ppm * PPM,
-        accel_scale=f.accel.scale_factor_ppm * PPM,
+        imu,
+        gyro_scale=imu.gyro_scale,
+        accel_scale=imu.accel_scale,
         gyro_misalignment=f.gyro.misalignment,
         accel_misalignment=f.accel.misalignment,
     )

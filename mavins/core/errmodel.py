@@ -13,6 +13,9 @@ bias vector's layout derive from it)::
     x[15:18] gg    gyro bias, first-order Gauss-Markov part (rad/s)
     x[18:21] ga    accelerometer bias, Gauss-Markov part (m/s^2)
     x[21]    ob    barometer offset (m)
+    x[22:25] sg    gyro scale-factor error (dimensionless, 1e-6 = 1 ppm)
+    x[25:28] sa    accelerometer scale-factor error (dimensionless)
+    x[28:31] mb    magnetometer hard-iron bias (body FRD, the magnetometer's unit)
 
 The first 15 are the contract's. A sensor bias (``measured = true + b``) is
 ``b = b_const + b_gm``: a turn-on constant, slowly walking (rate random walk),
@@ -36,6 +39,16 @@ i.e. ``dpsi = phi``, and errors are estimate minus truth), the blocks are::
     dbg/dt  = n_rrw,g                 dba/dt = n_rrw,a
     dgg/dt  = -gg / tau_g + n_gm,g    dga/dt = -ga / tau_a + n_gm,a
     dob/dt  = n_baro
+    dsg/dt  = dsa/dt = dmb/dt = 0     (random constants)
+
+Scale factor (Titterton & Weston, Strapdown Inertial Navigation Technology,
+2nd ed., 2004, ch. 12, sensor error model ``dw = B + S w``; KF-GINS's state):
+``measured = (1 + s) true + b`` per axis, corrected as ``(measured - b) /
+(1 + s)`` (kalman.correct_gyro); to first order the corrected rate is off by
+``-(db + diag(w) ds)``, so the scale-factor columns are the bias columns
+times the body rate or specific force: ``dphi/dt += -C diag(w_ib^b) sg``,
+``ddv/dt += -C diag(f^b) sa``. The magnetometer's hard iron enters only its
+measurement (kalman.mag_heading).
 
 with ``w_in = w_ie + w_en`` and ``f^n = C f^b``. ``F_phi,v``, ``F_phi,p``
 (here with dp in metres: the latitude column divided by R_N + h, the height
@@ -83,6 +96,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+import dataclasses
 from dataclasses import dataclass
 
 from typing import NamedTuple
@@ -113,12 +127,16 @@ STATE = (
     Block("GG", 3, "rad/s", "gyro bias, first-order Gauss-Markov part", sensor=True),
     Block("GA", 3, "m/s^2", "accelerometer bias, Gauss-Markov part", sensor=True),
     Block("BARO", 1, "m", "barometer offset", sensor=True),
+    Block("SG", 3, "1", "gyro scale-factor error", sensor=True),
+    Block("SA", 3, "1", "accelerometer scale-factor error", sensor=True),
+    Block("MB", 3, "mag", "magnetometer hard-iron bias, body FRD (the magnetometer's unit)", sensor=True),
 )
 OFFSET = {b.name: sum(a.size for a in STATE[:i]) for i, b in enumerate(STATE)}  # block -> first index
 NX = sum(b.size for b in STATE)
 # the blocks' first indices as module constants (numba takes module-level ints as compile-time constants)
 X_PHI, X_DV, X_DP = OFFSET["PHI"], OFFSET["DV"], OFFSET["DP"]
 X_BG, X_BA, X_GG, X_GA, X_BARO = OFFSET["BG"], OFFSET["BA"], OFFSET["GG"], OFFSET["GA"], OFFSET["BARO"]
+X_SG, X_SA, X_MB = OFFSET["SG"], OFFSET["SA"], OFFSET["MB"]
 N_CONTRACT = OFFSET["GG"]  # the contract's states (attitude ... accelerometer bias); the rest follow them
 X_SENSORS = min(OFFSET[b.name] for b in STATE if b.sensor)  # the sensor errors run from here to the end
 
@@ -134,7 +152,9 @@ SP_ACC_GM = 7  # m/s^2
 SP_ACC_TAU = 8  # s
 SP_ACC_RRW = 9  # m/s^2/sqrt(s)
 SP_BARO_DRIFT = 10  # random walk of the barometer offset (m/sqrt(s))
-SP_SIZE = 11
+SP_GYRO_SCALE = 11  # initial 1-sigma of the gyro scale-factor error (dimensionless; 0: not estimated)
+SP_ACC_SCALE = 12  # likewise of the accelerometer's
+SP_SIZE = 13
 
 _DEG = math.pi / 180.0
 _DEG_PER_H = _DEG / 3600.0
@@ -161,6 +181,8 @@ class ImuSpec:
     accel_gm: float = 0.0  # m/s^2
     accel_tau: float = 3600.0  # s
     accel_rrw: float = 0.0  # m/s^2/sqrt(s)
+    gyro_scale: float = 0.0  # 1-sigma scale-factor error per axis (dimensionless, 1e-6 = 1 ppm); 0: not estimated
+    accel_scale: float = 0.0  # likewise
 
     def __post_init__(self) -> None:
         for name in self.__dataclass_fields__:
@@ -186,6 +208,8 @@ class ImuSpec:
         sp[SP_ACC_TAU] = self.accel_tau
         sp[SP_ACC_RRW] = self.accel_rrw
         sp[SP_BARO_DRIFT] = float(baro_drift)
+        sp[SP_GYRO_SCALE] = self.gyro_scale
+        sp[SP_ACC_SCALE] = self.accel_scale
         return sp
 
 
@@ -198,6 +222,8 @@ SPEC_KEYS = (
     "accel_bias",
     "accel_bias_instability",
     "accel_bias_tau",
+    "gyro_scale",
+    "accel_scale",
 )
 
 
@@ -207,8 +233,10 @@ def spec_from_keys(keys: Mapping[str, float]) -> ImuSpec:
     ``gyro_arw`` deg/sqrt(h), ``gyro_bias`` and ``gyro_bias_instability``
     deg/h, ``gyro_bias_tau`` s, ``accel_vrw`` m/s/sqrt(h), ``accel_bias`` and
     ``accel_bias_instability`` m/s^2, ``accel_bias_tau`` s. A missing
-    instability means a constant bias; a missing key otherwise means 0. Other
-    keys (scale factor, misalignment) are not part of this model and ignored.
+    instability means a constant bias; a missing key otherwise means 0.
+    ``gyro_scale`` and ``accel_scale`` (ppm, 1-sigma) select the scale-factor
+    states (absent: not estimated); misalignment keys are not part of this
+    model and ignored.
     """
 
     def get(name: str) -> float:
@@ -230,6 +258,8 @@ def spec_from_keys(keys: Mapping[str, float]) -> ImuSpec:
         accel_bias=get("accel_bias"),
         accel_gm=get("accel_bias_instability"),
         accel_tau=tau("accel_bias_tau", "accel_bias_instability"),
+        gyro_scale=get("gyro_scale") * 1e-6,
+        accel_scale=get("accel_scale") * 1e-6,
     )
 
 
@@ -244,18 +274,22 @@ def spec_to_keys(spec: ImuSpec) -> dict[str, float]:
         "accel_bias": spec.accel_bias,
         "accel_bias_instability": spec.accel_gm,
         "accel_bias_tau": spec.accel_tau,
+        "gyro_scale": spec.gyro_scale * 1e6,
+        "accel_scale": spec.accel_scale * 1e6,
     }
 
 
 GRADES = grades.GRADES
 
 
-def spec_from_grade(name: str) -> ImuSpec:
+def spec_from_grade(name: str, scale_factors: bool = False) -> ImuSpec:
     """ImuSpec with the figures of grade ``name`` (core/grades.py, the simulator's too).
 
     The simulator draws ``bias = turn-on + Gauss-Markov + rate random walk``:
     the initial sigma is the turn-on sigma, the Gauss-Markov sigma and tau and
-    the rate random walk are taken as they are. Scale factor, misalignment,
+    the rate random walk are taken as they are; with ``scale_factors`` the
+    scale-factor magnitude (ppm) as the 1-sigma of the scale-factor states
+    (else they are not estimated). Misalignment,
     g-sensitivity, quantisation, timestamp jitter and dropped samples are not
     in this model.
     """
@@ -271,21 +305,31 @@ def spec_from_grade(name: str) -> ImuSpec:
         accel_gm=f.accel.gm_sigma,
         accel_tau=f.accel.tau_c,
         accel_rrw=f.accel.rate_random_walk,
+        gyro_scale=f.gyro.scale_factor_ppm * 1e-6 if scale_factors else 0.0,
+        accel_scale=f.accel.scale_factor_ppm * 1e-6 if scale_factors else 0.0,
     )
 
 
-def spec_of(spec: str | ImuSpec | Mapping[str, float]) -> ImuSpec:
-    """ImuSpec from a grade name, an ImuSpec or the contract's spec keys."""
+def spec_of(spec: str | ImuSpec | Mapping[str, float], scale_factors: bool = False) -> ImuSpec:
+    """ImuSpec from a grade name, an ImuSpec (as it is) or the contract's spec keys; the scale factors of the
+    grade or of the keys (``gyro_scale``/``accel_scale``, one of them then needed) only with ``scale_factors``
+    (the filter estimates them then: ``--scale-factors``)."""
     if isinstance(spec, str):
-        return spec_from_grade(spec)
-    if not isinstance(spec, ImuSpec):
-        return spec_from_keys(spec)
-    return spec
+        return spec_from_grade(spec, scale_factors)
+    if isinstance(spec, ImuSpec):
+        return spec
+    out = spec_from_keys(spec)
+    if not scale_factors:
+        return dataclasses.replace(out, gyro_scale=0.0, accel_scale=0.0)
+    if not (out.gyro_scale > 0.0 or out.accel_scale > 0.0):
+        raise ValueError("--scale-factors with an IMU spec needs gyro_scale and/or accel_scale (ppm) in it")
+    return out
 
 
-def make_spec(spec: str | ImuSpec | Mapping[str, float], baro_drift: float = 0.0) -> np.ndarray:
-    """Process-model vector from a grade name, an ImuSpec or the contract's spec keys."""
-    return spec_of(spec).as_array(baro_drift)
+def make_spec(spec: str | ImuSpec | Mapping[str, float], baro_drift: float = 0.0,
+              scale_factors: bool = False) -> np.ndarray:
+    """Process-model vector from a grade name, an ImuSpec or the contract's spec keys (:func:`spec_of`)."""
+    return spec_of(spec, scale_factors).as_array(baro_drift)
 
 
 # --- small dense linear algebra (explicit loops: numba's np.dot needs SciPy) --
@@ -345,7 +389,8 @@ def gravity_gradient(lat: float, h: float) -> float:
 def system_matrix(
     c: np.ndarray, v: np.ndarray, lat: float, h: float, f_n: np.ndarray, spec: np.ndarray, earth_on: bool
 ) -> np.ndarray:
-    """Continuous error dynamics F (NX x NX) at one point of the trajectory.
+    """Continuous error dynamics F (NX x NX) at one point of the trajectory, without the
+    scale-factor columns (:func:`scale_factor_columns` adds them where the motion is known).
 
     ``c`` = C_b^n, ``v`` NED velocity (m/s), lat (rad), h (m), ``f_n`` the
     specific force in n (m/s^2). ``earth_on`` False is the contract's
@@ -435,6 +480,20 @@ def system_matrix(
         for i in range(3):
             F[X_GA + i, X_GA + i] = -1.0 / spec[SP_ACC_TAU]
     return F
+
+
+@kernel
+def scale_factor_columns(F: np.ndarray, c: np.ndarray, w_b: np.ndarray, f_b: np.ndarray, spec: np.ndarray) -> None:
+    """Write the scale-factor columns into F (module docstring): ``-C diag(w_b)`` on phi for the gyro's,
+    ``-C diag(f_b)`` on dv for the accelerometer's, with ``w_b`` (rad/s) and ``f_b`` (m/s^2) the body rate
+    and specific force (the bias columns times the measured quantity, Titterton & Weston ch. 12). Only
+    for the scale factors the spec estimates (1-sigma > 0); the others stay decoupled."""
+    for i in range(3):
+        for j in range(3):
+            if spec[SP_GYRO_SCALE] > 0.0:
+                F[X_PHI + i, X_SG + j] = -c[i, j] * w_b[j]
+            if spec[SP_ACC_SCALE] > 0.0:
+                F[X_DV + i, X_SA + j] = -c[i, j] * f_b[j]
 
 
 @kernel

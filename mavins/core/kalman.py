@@ -8,10 +8,12 @@ error-state estimate is always zero and only P is propagated. The filter works i
 the geographic frame only (strapdown.GEOGRAPHIC): the engine and ``mavins nav``
 refuse aiding in the other frames.
 
-Bias vector ``bias`` (``B_*``, the filter's nominal bias estimates, subtracted
-from the IMU data): ``[bg_const(3) rad/s, ba_const(3) m/s^2, bg_gm(3),
-ba_gm(3), baro_offset m]``; ``bias[i]`` corrects ``x[X_BG + i]``. The bias
-the sensor carries is ``const + gm`` per axis.
+Bias vector ``bias`` (``B_*``, the filter's nominal sensor-error estimates):
+``[bg_const(3) rad/s, ba_const(3) m/s^2, bg_gm(3), ba_gm(3), baro_offset m,
+sg(3), sa(3) scale factors, mb(3) magnetometer hard iron]``; ``bias[i]``
+corrects ``x[X_SENSORS + i]``. The bias the sensor carries is ``const + gm``
+per axis; the IMU data are corrected as ``(measured - bias) / (1 + scale)``
+(:func:`correct_gyro`, :func:`correct_accel`).
 
 Innovations are *predicted minus measured*, ``nu = h(est) - z``, so that
 ``nu = H x + noise`` with x = estimate minus truth; the update is then
@@ -44,8 +46,10 @@ from .errmodel import (
     NX,
     SP_ACC_BIAS,
     SP_ACC_GM,
+    SP_ACC_SCALE,
     SP_GYRO_BIAS,
     SP_GYRO_GM,
+    SP_GYRO_SCALE,
     X_BA,
     X_BARO,
     X_BG,
@@ -53,8 +57,11 @@ from .errmodel import (
     X_DV,
     X_GA,
     X_GG,
+    X_MB,
     X_PHI,
+    X_SA,
     X_SENSORS,
+    X_SG,
     _set_skew,
     matmul,
     matmul_bt,
@@ -69,7 +76,22 @@ ALL_BUT_HEADING[X_PHI + 2] = 0.0
 # the bias vector: the sensor-error blocks of the state (errmodel.STATE), at the same places less X_SENSORS
 B_BG, B_BA, B_GG, B_GA, B_BARO = (X_BG - X_SENSORS, X_BA - X_SENSORS, X_GG - X_SENSORS, X_GA - X_SENSORS,
                                   X_BARO - X_SENSORS)
+B_SG, B_SA, B_MB = X_SG - X_SENSORS, X_SA - X_SENSORS, X_MB - X_SENSORS
 B_SIZE = NX - X_SENSORS
+
+
+@kernel
+def correct_gyro(bias: np.ndarray, axis: int, x: float, dt: float) -> float:
+    """A raw gyro reading on ``axis`` corrected by the estimates: ``(x - b dt) / (1 + s)`` with b the
+    bias (constant plus Gauss-Markov part, rad/s) and s the scale factor; x an angle increment over dt
+    (rad, s), or a rate with dt = 1 (errmodel.py, scale-factor model)."""
+    return (x - (bias[B_BG + axis] + bias[B_GG + axis]) * dt) / (1.0 + bias[B_SG + axis])
+
+
+@kernel
+def correct_accel(bias: np.ndarray, axis: int, x: float, dt: float) -> float:
+    """:func:`correct_gyro` for the accelerometer (m/s increment over dt, or m/s^2 with dt = 1)."""
+    return (x - (bias[B_BA + axis] + bias[B_GA + axis]) * dt) / (1.0 + bias[B_SA + axis])
 
 
 @kernel
@@ -427,9 +449,11 @@ def heading(s: np.ndarray, yaw_m: float, sigma: float) -> tuple[np.ndarray, np.n
 
 
 @kernel
-def mag_level(s: np.ndarray, cfg: np.ndarray, m_b: np.ndarray, w_ib: np.ndarray, dt: float) -> np.ndarray:
-    """A calibrated magnetometer sample ``m_b`` (body FRD, any unit) taken dt (s) before the solution,
-    carried to the solution's time and levelled with the estimated attitude (NED, same unit).
+def mag_level(s: np.ndarray, cfg: np.ndarray, bias: np.ndarray, m_b: np.ndarray, w_ib: np.ndarray,
+              dt: float) -> np.ndarray:
+    """A magnetometer sample ``m_b`` (body FRD, any unit) less the hard-iron estimate ``bias[B_MB:]``
+    (same unit), taken dt (s) before the solution, carried to the solution's time and levelled with the
+    estimated attitude (NED, same unit).
 
     A vector fixed in n seen in b obeys ``d(m_b)/dt = -w_nb x m_b`` (from the
     DCM differential equation ``dC_b^n/dt = C_b^n [w_nb x]``, attitude-equation
@@ -446,10 +470,13 @@ def mag_level(s: np.ndarray, cfg: np.ndarray, m_b: np.ndarray, w_ib: np.ndarray,
         w_in = earth.earth_rate_n(lat) + earth.transport_rate(lat, h, s[sd.S_V : sd.S_V + 3])
         for i in range(3):
             w[i] -= c[0, i] * w_in[0] + c[1, i] * w_in[1] + c[2, i] * w_in[2]
+    m_c = np.empty(3)
+    for i in range(3):
+        m_c[i] = m_b[i] - bias[B_MB + i]
     m_t = np.empty(3)
-    m_t[0] = m_b[0] - dt * (w[1] * m_b[2] - w[2] * m_b[1])
-    m_t[1] = m_b[1] - dt * (w[2] * m_b[0] - w[0] * m_b[2])
-    m_t[2] = m_b[2] - dt * (w[0] * m_b[1] - w[1] * m_b[0])
+    m_t[0] = m_c[0] - dt * (w[1] * m_c[2] - w[2] * m_c[1])
+    m_t[1] = m_c[1] - dt * (w[2] * m_c[0] - w[0] * m_c[2])
+    m_t[2] = m_c[2] - dt * (w[0] * m_c[1] - w[1] * m_c[0])
     return mat_vec(c, m_t)
 
 
@@ -459,25 +486,55 @@ def mag_tan_inclination(m: np.ndarray) -> float:
     return m[2] / np.sqrt(m[0] * m[0] + m[1] * m[1])
 
 
+MAG_STATS = 5  # mag_accept's running sums (tan I, count, horizontal strength), then aided.apply_mag's
+# consecutive rejections and the hard iron's initial variance (its reset)
+
+
 @kernel
 def mag_inclination(incl: np.ndarray, m: np.ndarray) -> float:
     """The model's tan(I) for :func:`mag_heading`: the mean over the accepted samples before this one, kept in
-    ``incl = [sum of tan I, count]`` (:func:`mag_accept`), or the levelled sample m's own while there are none."""
+    ``incl = [sum of tan I, count, sum of |m_h|]`` (:func:`mag_accept`), or the levelled sample m's own while
+    there are none."""
     if incl[1] == 0.0:
         return mag_tan_inclination(m)
     return incl[0] / incl[1]
 
 
 @kernel
+def mag_horizontal(incl: np.ndarray, m: np.ndarray) -> float:
+    """The horizontal field strength for :func:`mag_heading` (the sample's unit): the mean over the accepted
+    samples before this one (``incl``, :func:`mag_inclination`), or the levelled sample m's own."""
+    if incl[1] == 0.0:
+        return np.sqrt(m[0] * m[0] + m[1] * m[1])
+    return incl[2] / incl[1]
+
+
+@kernel
 def mag_accept(incl: np.ndarray, m: np.ndarray) -> None:
-    """Count the accepted levelled sample m's tan(I) into ``incl = [sum, count]`` (:func:`mag_inclination`)."""
+    """Count the accepted levelled sample m into ``incl`` (:func:`mag_inclination`)."""
     incl[0] += mag_tan_inclination(m)
     incl[1] += 1.0
+    incl[2] += np.sqrt(m[0] * m[0] + m[1] * m[1])
+
+
+@kernel
+def mag_disturbed(m: np.ndarray, incl_model: float, strength_model: float, gate_incl: float,
+                  gate_strength: float) -> bool:
+    """Whether a levelled sample m (NED) disagrees with the Earth's field a model gives: its inclination
+    ``atan2(m_D, |m_h|)`` off the model's ``incl_model`` (rad) by more than ``gate_incl`` (rad), or its
+    strength off ``strength_model`` by more than ``gate_strength`` (m's unit); a NaN model figure is
+    not checked (PX4 EKF2's magnetometer checks, EKF2_MAG_CHK_INC and EKF2_MAG_CHK_STR)."""
+    h = np.sqrt(m[0] * m[0] + m[1] * m[1])
+    if np.isfinite(incl_model) and abs(np.arctan2(m[2], h) - incl_model) > gate_incl:
+        return True
+    if np.isfinite(strength_model) and abs(np.sqrt(h * h + m[2] * m[2]) - strength_model) > gate_strength:
+        return True
+    return False
 
 
 @kernel
 def mag_heading(
-    m: np.ndarray, declination: float, tan_incl: float, sigma: float
+    s: np.ndarray, m: np.ndarray, declination: float, tan_incl: float, horizontal: float, sigma: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Heading from a levelled magnetometer sample m (NED, :func:`mag_level`).
 
@@ -497,13 +554,24 @@ def mag_heading(
     Callers pass the mean tan I of the accepted samples before this one
     (:func:`mag_inclination`). sigma (rad) is the heading noise, about
     sensor noise / horizontal field.
+
+    Hard iron: the sample is corrected by the estimate, ``m = C (m_b - b)``,
+    so an error db of the estimate moves m by ``-C db`` and the heading by
+    ``-g^T C db`` with ``g = [-sin D, cos D, 0] / |m_h|`` (the gradient of
+    atan2 at the model's field): ``H_mb = -g^T C``, with ``horizontal`` the
+    horizontal strength ``|m_h|`` (the sample's unit, :func:`mag_horizontal`).
     """
+    c = s[sd.S_C : sd.S_C + 9].reshape(3, 3)
     nu = np.empty(1)
     nu[0] = wrap_pi(np.arctan2(m[1], m[0]) - declination)
     H = np.zeros((1, NX))
     H[0, X_PHI] = -tan_incl * np.cos(declination)
     H[0, X_PHI + 1] = -tan_incl * np.sin(declination)
     H[0, X_PHI + 2] = 1.0
+    g0 = -np.sin(declination) / horizontal
+    g1 = np.cos(declination) / horizontal
+    for j in range(3):
+        H[0, X_MB + j] = -(g0 * c[0, j] + g1 * c[1, j])
     R = np.zeros((1, 1))
     R[0, 0] = sigma * sigma
     return nu, H, R
@@ -561,12 +629,14 @@ def zaru(
 
 @kernel
 def initial_covariance(
-    spec: np.ndarray, sigma_pos: float, sigma_vel: float, sigma_level: float, sigma_yaw: float, sigma_baro: float
+    spec: np.ndarray, sigma_pos: float, sigma_vel: float, sigma_level: float, sigma_yaw: float, sigma_baro: float,
+    sigma_mag_bias: float
 ) -> np.ndarray:
-    """Diagonal initial P: position (m, each axis), velocity (m/s), level and yaw (rad), baro offset (m).
+    """Diagonal initial P: position (m, each axis), velocity (m/s), level and yaw (rad), baro offset (m),
+    magnetometer hard iron (its unit, each axis; 0: taken as calibrated, not estimated).
 
     The bias blocks take the spec's initial 1-sigma (constant part) and the
-    stationary Gauss-Markov sigma.
+    stationary Gauss-Markov sigma, the scale factors the spec's (0: not estimated).
     """
     P = np.zeros((NX, NX))
     for i in range(3):
@@ -576,6 +646,9 @@ def initial_covariance(
         P[X_BA + i, X_BA + i] = spec[SP_ACC_BIAS] ** 2
         P[X_GG + i, X_GG + i] = spec[SP_GYRO_GM] ** 2
         P[X_GA + i, X_GA + i] = spec[SP_ACC_GM] ** 2
+        P[X_SG + i, X_SG + i] = spec[SP_GYRO_SCALE] ** 2
+        P[X_SA + i, X_SA + i] = spec[SP_ACC_SCALE] ** 2
+        P[X_MB + i, X_MB + i] = sigma_mag_bias * sigma_mag_bias
     P[X_PHI, X_PHI] = sigma_level * sigma_level
     P[X_PHI + 1, X_PHI + 1] = sigma_level * sigma_level
     P[X_PHI + 2, X_PHI + 2] = sigma_yaw * sigma_yaw
