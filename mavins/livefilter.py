@@ -92,6 +92,7 @@ class LiveFilter:
         self._T_k = 0.0  # s: the last attitude interval (velocity fixes are interpolated over it)
         self._incl = np.zeros(kalman.MAG_STATS)  # running sums over the accepted magnetometer samples
         self.free = kalman.ALL  # the states an update may correct (kalman.update); the engine holds the heading back
+        self._kept = False  # whether the measurement being applied changed the filter (_apply)
         self._bind(sd.GEOGRAPHIC)
 
     def _bind(self, frame: int) -> None:
@@ -219,6 +220,14 @@ class LiveFilter:
         self._apply(s, cfg, t_m, kind, args)
 
     def _apply(self, s: np.ndarray, cfg: np.ndarray, t_m: float, kind: str, args: tuple) -> None:
+        """One measurement: P propagated to it, the update(s); a measurement that changed nothing (rejected,
+        disturbed) leaves P and the pending propagation as they were (aided.keep_or_undo, as the batch)."""
+        P0, acc0 = self.P.copy(), self.acc.copy()
+        self._kept = False
+        self._measure(s, cfg, t_m, kind, args)
+        aided.keep_or_undo(self._kept, self.P, self.acc, P0, acc0)
+
+    def _measure(self, s: np.ndarray, cfg: np.ndarray, t_m: float, kind: str, args: tuple) -> None:
         tk = sd.state_time(s)
         late = max(0.0, tk - t_m)
         self._flush_kernel(s, cfg, self.spec, self.P, self.acc)
@@ -238,7 +247,9 @@ class LiveFilter:
                 self.gnss_seen = True
                 self.last_pos_t = self.last_hgt_t = t_m
             self.glitch = not ok
-            if vel is not None:
+            if vel is not None and not ok:  # a fix whose position failed the gate is a glitch: its velocity too
+                self.counters["gnss_vel_rejected"] += 1
+            elif vel is not None:
                 v = np.asarray(vel, dtype=float)
                 model = kalman.gnss_velocity(s, v, np.array(self._w_ib), self.lever, late, self._T_k, sig_vel)
                 if not math.isfinite(v[2]):  # ground speed and course (GPS_RAW_INT): the horizontal rows
@@ -256,6 +267,7 @@ class LiveFilter:
                 s, cfg, self.bias, self.P, self._incl, np.asarray(m_b, dtype=float), np.array(self._w_ib), late,
                 math.radians(self.settings.declination), math.radians(self.settings.sigma_mag), incl, strength,
                 aided.MAG_STRENGTH_GATE, self.settings.gate, self.free)
+            self._kept = status >= 1  # accepted, or rejected with the hard iron reset
             if status < 0:  # a motor, steel, a power cable: the field is not the Earth's (aided.apply_mag)
                 self.counters["mag_disturbed"] += 1
             else:
@@ -263,7 +275,10 @@ class LiveFilter:
                 self.ratios["mag"] = ratio * ratio
         elif kind == "gnss_yaw":  # the heading of a dual-antenna receiver, the vehicle's (rad, 1-sigma rad)
             yaw, sigma = args
-            self._update(s, cfg, "gnss_yaw", ("mag",), kalman.heading(s, yaw, sigma))
+            if self.glitch:  # its fix's position failed the gate (the fix comes first): not used either
+                self.counters["gnss_yaw_rejected"] += 1
+            else:
+                self._update(s, cfg, "gnss_yaw", ("mag",), kalman.heading(s, yaw, sigma))
         elif kind == "zupt":
             self._update(s, cfg, "zupt", ("vel",), kalman.zupt(s, self.settings.sigma_zupt))
 
@@ -272,6 +287,7 @@ class LiveFilter:
         """Apply one measurement model (nu, H, R) with the gate, count it, keep its test ratio."""
         nu, H, R = model
         _, ratio, ok = kalman.apply_update(s, cfg, self.bias, self.P, H, nu, R, self.settings.gate, self.free)
+        self._kept = self._kept or bool(ok)
         self.counters[f"{kind}_{'accepted' if ok else 'rejected'}"] += 1
         for key in ratio_keys:
             self.ratios[key] = ratio * ratio

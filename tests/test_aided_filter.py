@@ -348,17 +348,18 @@ def test_gnss_outage_stays_inside_three_sigma(trajectory) -> None:
 
 
 def test_gate_rejects_an_outlier(trajectory) -> None:
-    """A fix 100 m north of the truth is rejected and counted; the run equals one without that fix."""
+    """A fix 100 m north of the truth is rejected and counted, its velocity with it (a glitch); the run equals
+    one without that fix bit for bit (a rejected measurement leaves no trace)."""
     imu, gnss, init, _, _ = simulate_run(trajectory, 11)
     bad = gnss.copy()
     k = 70
     bad[k, 1] += math.degrees(100.0 / 6.37e6)
     rows_bad, st_bad = aided.navigate_aided(imu, init, bad, static=STATIC, spec="consumer", file_units=False)
     none = gnss.copy()
-    none[k, 1:4] = np.nan
+    none[k, 1:7] = np.nan
     rows_none, st_none = aided.navigate_aided(imu, init, none, static=STATIC, spec="consumer", file_units=False)
     fixes = int(np.sum(gnss[:, 0] <= imu[-1, 0]))
-    assert st_bad["counts"]["gnss_pos"] == (fixes - 1, 1)
+    assert st_bad["counts"]["gnss_pos"] == (fixes - 1, 1) and st_bad["counts"]["gnss_vel"] == (fixes - 1, 1)
     assert st_none["counts"]["gnss_pos"] == (fixes - 1, 0)
     np.testing.assert_array_equal(rows_bad, rows_none)
     log = st_bad["nis"]

@@ -861,3 +861,24 @@ def test_rest_windows_sharing_their_ends_log_every_update() -> None:
     assert len(log) == 19
     np.testing.assert_allclose(np.sort(log[log[:, 1] == aided.K_ZUPT, 0]),
                                np.sort(np.r_[np.arange(1, 11) * DT, [0.02, 0.04, 0.06, 0.08]]), atol=1e-15)
+
+
+def test_a_rejected_measurement_leaves_no_trace() -> None:
+    """A fix 1 km off (position rejected by the gate) with a velocity that alone would pass: the velocity is
+    counted rejected with its position (a glitch), and P, the solution and the rows equal those of the run
+    without that row bit for bit, although it fell between the propagations (aided.keep_or_undo). A rejected
+    baro sample likewise; an accepted fix does change P."""
+    P = np.diag([1e-4] * 3 + [0.01] * 3 + [1.0] * 3 + [1e-6] * 12 + [1.0] + [0.0] * 9)
+    lat0, lon0 = math.radians(LAT0), math.radians(LON0)
+    good = [0.045, lat0, lon0, H0, 0.0, 0.0, 0.0, 1.0, 1.0, 0.1]
+    far = [0.055, lat0 + 1000.0 / RN, lon0, H0, 0.05, 0.0, 0.0, 1.0, 1.0, 0.1]
+    ref = run_direct(imu(), P=P.copy(), predict_every=3, gnss=[good])
+    got = run_direct(imu(), P=P.copy(), predict_every=3, gnss=[good, far], baro=[[0.065, H0 + 500.0, 0.5]])
+    assert got[4][aided.K_GNSS_POS].tolist() == [1, 1] and got[4][aided.K_GNSS_VEL].tolist() == [1, 1]
+    assert got[4][aided.K_BARO].tolist() == [0, 1]
+    np.testing.assert_array_equal(got[1], ref[1])  # P
+    np.testing.assert_array_equal(got[0], ref[0])  # the state
+    np.testing.assert_array_equal(got[3], ref[3])  # the rows
+    near = [0.055, lat0 + 0.5 / RN, lon0, H0, 0.0, 0.0, 0.0, 1.0, 1.0, 0.1]
+    moved = run_direct(imu(), P=P.copy(), predict_every=3, gnss=[good, near])
+    assert not np.array_equal(moved[1], ref[1])

@@ -385,7 +385,8 @@ def test_covariance_is_flushed_before_a_measurement_and_propagated_every_n_updat
     """Gyro ARW 0.01 rad/sqrt(s) only, propagation every 2 updates (predict_dt 0.02, 0.01 s samples): in the
     laboratory mode the attitude variance grows by ARW^2 T exactly (Qd = (Phi Qc Phi^T + Qc) T / 2 with the
     attitude rows of Phi the identity). After one update nothing yet; a measurement first propagates the 0.01 s
-    that waited (even for a rejected one); then every second update propagates 0.02 s."""
+    that waited, and a rejected one leaves P and the waiting interval as they were; then every second update
+    propagates 0.02 s."""
     arw_key = 0.01 / DEG * 60.0  # 0.01 rad/sqrt(s) in deg/sqrt(h)
     s = state()
     f = LiveFilter(FilterSettings(spec={"gyro_arw": arw_key}, predict_dt=0.02))
@@ -396,7 +397,9 @@ def test_covariance_is_flushed_before_a_measurement_and_propagated_every_n_updat
     assert q == pytest.approx(1e-4, rel=1e-15)
     still(f, s, 1.01)
     assert not f.P.any()
-    f.measure(s, CFG, 1.01, "baro", H0 + 100.0, 1.0)  # 100 sigma: rejected, but the propagation ran first
+    f.measure(s, CFG, 1.01, "baro", H0 + 100.0, 1.0)  # 100 sigma: rejected, no trace
+    assert not f.P.any() and f.acc[12] == pytest.approx(0.01, rel=1e-12)
+    f.measure(s, CFG, 1.01, "baro", H0 - 0.5, 1.0)  # accepted: the 0.01 s that waited propagated first
     np.testing.assert_allclose(np.diag(f.P)[0:3], q * 0.01, rtol=1e-12, atol=0)
     assert not f.acc.any()
     still(f, s, 1.02)
@@ -557,17 +560,22 @@ def test_resets_count_horizontal_corrections_above_one_metre() -> None:
     assert f.uncertainty(T0, 2).resets == 4
 
 
-def test_rejected_gnss_is_a_glitch_and_its_velocity_still_counts() -> None:
+def test_rejected_gnss_is_a_glitch_with_its_velocity_and_heading() -> None:
     """A fix 40 m off with S = 4 + 4 is 14 sigma (gate 5): rejected, counted, position unchanged, glitch, not
-    absolute, GNSS not seen; its velocity (P_v = R) is still applied. The next accepted fix clears the glitch."""
+    absolute, GNSS not seen; its velocity (which alone would pass) and its dual-antenna heading are rejected
+    with it, and P is as before (a rejected measurement leaves no trace). The next accepted fix clears the
+    glitch."""
     s = state()
     f = live(s, p={**pos_var(4.0), **vel_var(0.01)})
+    P0 = f.P.copy()
     f.measure(s, CFG, T0, "gnss", *fix(40.0), (0.2, 0.0, -0.1), 2.0, 2.0, 0.1)
+    f.measure(s, CFG, T0, "gnss_yaw", 0.01, 0.1)
     np.testing.assert_allclose(offset(s), 0.0, atol=1e-12)
-    np.testing.assert_allclose(velocity(s), [0.1, 0.0, -0.05], rtol=0, atol=1e-12)
-    assert f.counters == {"gnss_pos_rejected": 1, "gnss_vel_accepted": 1}
+    np.testing.assert_array_equal(velocity(s), 0.0)
+    np.testing.assert_array_equal(f.P, P0)
+    assert f.counters == {"gnss_pos_rejected": 1, "gnss_vel_rejected": 1, "gnss_yaw_rejected": 1}
     assert f.ratios["pos"] == pytest.approx(1600.0 / 8.0 / 25.0, rel=1e-8) == f.ratios["hgt"]
-    assert f.ratios["vel"] == pytest.approx(0.04 / 0.02 / 25.0, rel=1e-12)
+    assert "vel" not in f.ratios
     assert f.glitch and not f.gnss_seen
     u = f.uncertainty(T0, 0)
     assert u.glitch and not u.abs_pos and not u.abs_hgt

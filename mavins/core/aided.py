@@ -27,7 +27,9 @@ are skipped):
 
 * GNSS ``t, lat, lon (rad), h (m), vn, ve, vd (m/s), sigma_h, sigma_v (m),
   sigma_vel (m/s)``: position used when lat, lon, h are finite, velocity
-  when vn, ve, vd are;
+  when vn, ve, vd are, unless the row's position failed the gate (a glitch:
+  its velocity is counted rejected, not logged; the live path does the same
+  and drops the fix's dual-antenna heading too);
 * baro ``t, h (m), sigma (m)``: h is barometric height with an unknown
   offset the filter estimates (state X_BARO);
 * mag ``t, mx, my, mz (body FRD, any unit), sigma (rad)``: heading through
@@ -206,6 +208,19 @@ def push_rate_aided(s: np.ndarray, cfg: np.ndarray, spec: np.ndarray, P: np.ndar
 
 
 @kernel
+def keep_or_undo(kept: bool, P: np.ndarray, acc: np.ndarray, P0: np.ndarray, acc0: np.ndarray) -> None:
+    """After a measurement: unless it changed the filter (``kept``), put P and the pending propagation ``acc``
+    back as they were before it (``P0``, ``acc0``), so that a rejected measurement leaves no trace, not
+    even the propagation it split in two (the batch and the live path alike)."""
+    if not kept:
+        for i in range(P.shape[0]):
+            for j in range(P.shape[1]):
+                P[i, j] = P0[i, j]
+        for i in range(acc.shape[0]):
+            acc[i] = acc0[i]
+
+
+@kernel
 def _record(
     log: np.ndarray, n_log: int, counts: np.ndarray, t: float, kind: int, dof: int, nis: float, ratio: float, ok: bool
 ) -> int:
@@ -238,7 +253,7 @@ def apply_mag(s: np.ndarray, cfg: np.ndarray, bias: np.ndarray, P: np.ndarray, i
     model figure, the running means ``incl`` of the accepted samples (kalman.MAG_STATS), which an accepted
     sample joins. After MAG_RESET_AFTER rejections in a row the hard iron's covariance is reset to its
     initial variance ``incl[4]`` (none when 0). Returns ``(status, nis, ratio)``: status 1 accepted, 0
-    rejected by the gate, -1 disturbed (not applied).
+    rejected by the gate, 2 rejected and the hard iron reset, -1 disturbed (not applied).
     """
     m_n = kf.mag_level(s, cfg, bias, m_b, w_ib, late)
     # the checks allow for the hard iron not learnt yet: 3 sigma of its largest axis on the strength, and
@@ -275,6 +290,7 @@ def apply_mag(s: np.ndarray, cfg: np.ndarray, bias: np.ndarray, P: np.ndarray, i
                 P[k, j] = 0.0
             P[j, j] = incl[4]
         incl[3] = 0.0
+        return 2, nis, ratio
     return 0, nis, ratio
 
 
@@ -399,28 +415,43 @@ def run_aided(
             w_ib[a] = sums[a] / T
         after_k_update(s, cfg, spec, P, bias, acc, sums, predict_every, GEOGRAPHIC)
 
+        # each measurement row: P propagated to it, updated; a row that changed nothing (rejected, disturbed,
+        # no value) leaves P and the pending propagation as they were (_keep_or_undo)
         while ig < gnss.shape[0] and gnss[ig, 0] <= tk:
+            P0, acc0, kept = P.copy(), acc.copy(), False
             _propagate(s, cfg, spec, P, acc, GEOGRAPHIC)
             row = gnss[ig]
             late = tk - row[0]
+            glitch = False
             if np.isfinite(row[1]) and np.isfinite(row[2]) and np.isfinite(row[3]):
                 nu, H, R = kf.gnss_position(s, cfg, row[1], row[2], row[3], lever, late, row[7], row[8])
                 nis, ratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate, kf.ALL)
                 n_log = _record(log, n_log, counts, row[0], K_GNSS_POS, nu.shape[0], nis, ratio, ok)
-            if np.isfinite(row[4]) and np.isfinite(row[5]) and np.isfinite(row[6]):
+                kept = kept or ok
+                glitch = not ok
+            has_vel = np.isfinite(row[4]) and np.isfinite(row[5]) and np.isfinite(row[6])
+            if has_vel and glitch:  # a fix whose position failed the gate is a glitch: its velocity too
+                counts[K_GNSS_VEL, 1] += 1
+            elif has_vel:
                 v_m[0], v_m[1], v_m[2] = row[4], row[5], row[6]
                 nu, H, R = kf.gnss_velocity(s, v_m, w_ib, lever, late, T, row[9])
                 nis, ratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate, kf.ALL)
                 n_log = _record(log, n_log, counts, row[0], K_GNSS_VEL, nu.shape[0], nis, ratio, ok)
+                kept = kept or ok
+            keep_or_undo(kept, P, acc, P0, acc0)
             ig += 1
         while ib < baro.shape[0] and baro[ib, 0] <= tk:
+            P0, acc0, kept = P.copy(), acc.copy(), False
             _propagate(s, cfg, spec, P, acc, GEOGRAPHIC)
             if np.isfinite(baro[ib, 1]):
                 nu, H, R = kf.baro_height(s, bias, baro[ib, 1], tk - baro[ib, 0], baro[ib, 2])
                 nis, ratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate, kf.ALL)
                 n_log = _record(log, n_log, counts, baro[ib, 0], K_BARO, 1, nis, ratio, ok)
+                kept = ok
+            keep_or_undo(kept, P, acc, P0, acc0)
             ib += 1
         while im < mag.shape[0] and mag[im, 0] <= tk:
+            P0, acc0, kept = P.copy(), acc.copy(), False
             _propagate(s, cfg, spec, P, acc, GEOGRAPHIC)
             m_b[0], m_b[1], m_b[2] = mag[im, 1], mag[im, 2], mag[im, 3]
             if np.isfinite(m_b[0]) and np.isfinite(m_b[1]) and np.isfinite(m_b[2]):
@@ -431,16 +462,21 @@ def run_aided(
                     counts[K_MAG_DISTURBED, 1] += 1
                 else:
                     n_log = _record(log, n_log, counts, mag[im, 0], K_MAG, 1, nis, ratio, status == 1)
+                kept = status >= 1
+            keep_or_undo(kept, P, acc, P0, acc0)
             im += 1
         while iz < static.shape[0] and static[iz, 0] <= tk:
             if tk <= static[iz, 1]:
+                P0, acc0 = P.copy(), acc.copy()
                 _propagate(s, cfg, spec, P, acc, GEOGRAPHIC)
                 nu, H, R = kf.zupt(s, static[iz, 2])
                 nis, ratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate, kf.ALL)
                 n_log = _record(log, n_log, counts, tk, K_ZUPT, nu.shape[0], nis, ratio, ok)
+                keep_or_undo(ok, P, acc, P0, acc0)
             if tk < static[iz, 1]:
                 break
             if raw_t > 0.0:
+                P0, acc0 = P.copy(), acc.copy()
                 _propagate(s, cfg, spec, P, acc, GEOGRAPHIC)
                 sig = static[iz, 3]
                 if not sig > 0.0:
@@ -455,6 +491,7 @@ def run_aided(
                     R[a, a] += walk * raw_t / 3.0
                 nis, ratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate, kf.ALL)
                 n_log = _record(log, n_log, counts, tk, K_ZARU, nu.shape[0], nis, ratio, ok)
+                keep_or_undo(ok, P, acc, P0, acc0)
             for a in range(3):
                 raw_sum[a] = 0.0
             raw_t = 0.0
