@@ -910,6 +910,9 @@ def _add_demo(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--gnss-outage", type=_Outage(), default="60,90", metavar="START,END",
                    help="no GNSS between these sensor times (s)")
     p.add_argument("--no-outage", action="store_true", help="GNSS throughout")
+    p.add_argument("--scale-factors", action="store_true",
+                   help="the service's filter estimates the IMU's scale factors too; the report shows them beside "
+                        "the simulated unit's")
     p.set_defaults(func=_cmd_demo)
 
 
@@ -943,7 +946,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     try:
         report = run_demo(args.scenario, args.duration, speed, args.grade, heading,  # type: ignore[arg-type]
                           None if args.no_rerun else args.rerun, args.rerun_serve, args.seed, stop,
-                          aiding=args.aiding, gnss_outage=None if args.no_outage else args.gnss_outage)
+                          aiding=args.aiding, gnss_outage=None if args.no_outage else args.gnss_outage,
+                          scale_factors=args.scale_factors)
     except KeyboardInterrupt:
         stop.set()
         print("mavins demo: interrupted", file=sys.stderr)
