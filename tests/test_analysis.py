@@ -351,3 +351,59 @@ def test_cli_output_that_is_a_file_is_refused(tmp_path: Path, capsys: pytest.Cap
     assert main(["analyze", "flight", "--runs", "2", "--duration", "2", "-o", str(target)]) == 2
     assert "expected a directory" in capsys.readouterr().err
     assert target.read_text() == "keep"
+
+
+def test_monte_carlo_sigma_is_the_sample_sigma_over_n_minus_1() -> None:
+    """analysis.mc_sigma: the sample standard deviation with n - 1 (two runs a and -a give a sqrt(2), not a),
+    per output time and column, the attitude columns turned to degrees and nothing else."""
+    a = np.arange(1.0, 10.0) * 0.01
+    errors = np.stack([np.stack([a, 2 * a]), np.stack([-a, -2 * a])])  # (runs 2, n_out 2, 9)
+    s = an.mc_sigma(errors)
+    want = np.stack([a, 2 * a]) * math.sqrt(2.0)
+    want[:, 6:9] *= 180.0 / math.pi
+    np.testing.assert_allclose(s, want, rtol=1e-14, atol=0)
+
+
+def test_the_printed_table_sums_north_and_east_as_the_budget_does() -> None:
+    """The summary's Monte Carlo row: horizontal position and velocity and the level attitude as the root of
+    the north and east sample variances (as cov.budget_row for the covariance), vertical and yaw as they are."""
+    budget = {name: np.array([1.0, 2.0, 3.0, 4.0, 5.0]) for name in cov.SOURCES}
+    budget["total"] = np.array([6.0, 7.0, 8.0, 9.0, 10.0])
+    m = np.array([3.0, 4.0, 12.0, 0.6, 0.8, 0.05, 0.05, 0.12, 0.7])
+    result = an.AnalysisResult(np.array([0.0, 60.0]), np.zeros((2, 9)), np.stack([np.zeros(9), m]), budget, 40)
+    lines = an._table(result).splitlines()
+    assert lines[0] == "error budget at t = 60 s (1-sigma, each source alone)"
+    mc = lines[-1]
+    assert mc.startswith("Monte Carlo (40 runs)")
+    assert [float(v) for v in mc.split(")")[1].split()] == pytest.approx([5.0, 12.0, 1.0, 0.13, 0.7], rel=1e-12)
+    assert [float(v) for v in lines[-2].split(")")[1].split()] == [6.0, 7.0, 8.0, 9.0, 10.0]
+
+
+MC_HOLD_SPEC = cov.AnalysisSpec(  # gyro and accelerometer with different figures, instability and rate random walk
+    em.ImuSpec(gyro_arw=0.1 * math.radians(1.0) / 60.0, gyro_bias=math.radians(1.0) / 3600.0,
+               gyro_gm=math.radians(3.0) / 3600.0, gyro_tau=40.0, gyro_rrw=math.radians(2.0) / 3600.0 / 10.0,
+               accel_vrw=0.05 / 60.0, accel_bias=1e-3, accel_gm=4e-3, accel_tau=90.0, accel_rrw=2e-4),
+    gyro_scale=1500e-6, accel_scale=2000e-6, gyro_misalignment=60.0 * cov.ARCSEC,
+    accel_misalignment=100.0 * cov.ARCSEC)
+
+
+def test_covariance_matches_monte_carlo_with_every_source_and_the_vertical_held(flight_short: object) -> None:
+    """``--vertical hold`` with gyro and accelerometer figures that differ, Gauss-Markov instabilities and rate
+    random walks: the instability and rate-random-walk sources are not negligible (above 5 % of the total),
+    the held vertical is zero in the covariance and round-off in the runs, and every horizontal and attitude sigma of the 300 runs lies in the sample sigma's band around
+    the covariance's (chi with 299 dof, Bonferroni over the values compared, 1e-3 overall)."""
+    opts = an.AnalysisOptions(runs=MC_RUNS, jobs=2, duration=120.0, rate=50.0, vertical="hold", every=1.0)
+    result = an.analyze(flight_short, MC_HOLD_SPEC, opts)
+    total = result.budget["total"]
+    horizontal = [0, 2, 3, 4]  # the budget's pos_h, vel_h, att_level, att_yaw (pos_v is held)
+    for name in ("gyro_instability", "accel_instability", "gyro_rate_random_walk", "accel_rate_random_walk"):
+        assert np.max(result.budget[name][horizontal] / total[horizontal]) > 0.05, name
+    assert total[1] == 0.0
+    assert np.all(result.covariance[:, [2, 5]] == 0.0)
+    assert np.all(result.montecarlo[:, [2, 5]] < 1e-9)  # held to the truth: round-off only
+    times = [30, 60, 90, 120]
+    rows = [int(np.argmin(abs(result.t - result.t[0] - s))) for s in times]
+    cols = [0, 1, 3, 4, 6, 7, 8]
+    lo, hi = chi_band(MC_RUNS - 1, 1e-3 / (len(rows) * len(cols)))
+    ratio = result.montecarlo[rows][:, cols] / result.covariance[rows][:, cols]
+    assert np.all((ratio > lo) & (ratio < hi)), (lo, hi, ratio)

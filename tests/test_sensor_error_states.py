@@ -180,3 +180,103 @@ def test_file_columns_follow_the_estimated_states() -> None:
     f = aided.unit_factors(names)
     assert list(f[35:47]) == [1e6] * 12 and list(f[47:]) == [1.0] * 6
 
+
+
+def _mag_setup(inc_deg: float = 60.0, strength: float = 0.5, off_deg: float = 0.0):
+    """A level solution at yaw 0.5 rad (laboratory frame), P with the heading, the tilt and an uneven hard-iron
+    variance (1-sigma 0.01, 0.05, 0.02 per axis, correlated with the heading), and a sample of the field of
+    inclination ``inc_deg`` and ``strength``, ``off_deg`` east of D = 0.05 rad."""
+    s = sd.init_state(0.0, 0.8, 0.1, 100.0, np.zeros(3), 0.0, 0.0, 0.5)
+    c = s[sd.S_C:sd.S_C + 9].reshape(3, 3)
+    inc, az = math.radians(inc_deg), 0.05 + math.radians(off_deg)
+    m_n = strength * np.array([math.cos(inc) * math.cos(az), math.cos(inc) * math.sin(az), math.sin(inc)])
+    P = np.diag([1e-6, 1e-6, 1e-3] + [1e-4] * (em.NX - 3))
+    for i, sig in enumerate((0.01, 0.05, 0.02)):
+        P[em.X_MB + i, em.X_MB + i] = sig * sig
+    P[em.X_PHI + 2, em.X_MB + 1] = P[em.X_MB + 1, em.X_PHI + 2] = 1e-4
+    return s, P, np.zeros(kf.B_SIZE), np.zeros(kf.MAG_STATS), c.T @ m_n
+
+
+def test_apply_mag_takes_the_models_field_where_it_is_known() -> None:
+    """The heading update's Jacobian uses the model's tan I and horizontal strength F cos I where both are
+    given; the model's tan I and the samples' horizontal strength with the inclination only; the samples'
+    own figures (here the first sample's) without a model: each equal, bit for bit, to kalman.mag_heading
+    with those figures and one kalman.apply_update."""
+    dec, sig = 0.05, 0.02
+    inc_m, f_m = math.radians(66.0), 0.45  # the model's, not the sample's (60 deg, 0.5)
+    h_sample = 0.5 * math.cos(math.radians(60.0))
+    for incl_model, strength_model, tan_i, horiz in ((inc_m, f_m, math.tan(inc_m), f_m * math.cos(inc_m)),
+                                                     (inc_m, math.nan, math.tan(inc_m), h_sample),
+                                                     (math.nan, math.nan, math.tan(math.radians(60.0)), h_sample)):
+        s, P, bias, incl, m_b = _mag_setup(off_deg=1.0)
+        s2, P2, b2 = s.copy(), P.copy(), bias.copy()
+        m = kf.mag_level(s2, CFG_LAB, b2, m_b, np.zeros(3), 0.0)
+        nu, H, R = kf.mag_heading(s2, m, dec, tan_i, horiz, sig)
+        kf.apply_update(s2, CFG_LAB, b2, P2, H, nu, R, 5.0, kf.ALL)
+        status, _, _ = aided.apply_mag(s, CFG_LAB, bias, P, incl, m_b, np.zeros(3), 0.0, dec, sig, incl_model,
+                                       strength_model, math.nan, 5.0, kf.ALL)
+        assert status == 1
+        np.testing.assert_allclose(P, P2, rtol=1e-12, atol=1e-18)
+        np.testing.assert_allclose(bias, b2, rtol=1e-12, atol=1e-15)
+
+
+@pytest.mark.parametrize("what,delta,disturbed", [
+    ("strength", -0.01, False), ("strength", 0.01, True),
+    ("inclination", -1.0, False), ("inclination", 1.0, True),
+])
+def test_the_disturbance_checks_allow_for_the_unlearnt_hard_iron(what: str, delta: float, disturbed: bool) -> None:
+    """With the hard iron's largest 1-sigma 0.05 (of 0.01, 0.05, 0.02), the strength check is 0.2 + 0.15 and
+    the inclination check 20 deg + atan(0.15 / F) (F = 0.5: 16.7 deg): just inside passes, just outside is
+    disturbed (-1, nothing changed)."""
+    widen = 3.0 * 0.05
+    if what == "strength":
+        s, P, bias, incl, m_b = _mag_setup(strength=0.5 + 0.2 + widen + delta)
+    else:
+        s, P, bias, incl, m_b = _mag_setup(inc_deg=60.0 - (20.0 + math.degrees(math.atan(widen / 0.5)) + delta))
+    P0 = P.copy()
+    status, _, _ = aided.apply_mag(s, CFG_LAB, bias, P, incl, m_b, np.zeros(3), 0.0, 0.05, 10.0,
+                                   math.radians(60.0), 0.5, 0.2, 1e9, kf.ALL)
+    assert (status == -1) is disturbed
+    if disturbed:
+        np.testing.assert_array_equal(P, P0)
+    # without a strength check (its gate NaN) the strength is not looked at
+    if what == "strength":
+        s, P, bias, incl, m_b = _mag_setup(strength=3.0)
+        status, _, _ = aided.apply_mag(s, CFG_LAB, bias, P, incl, m_b, np.zeros(3), 0.0, 0.05, 10.0,
+                                       math.radians(60.0), 0.5, math.nan, 1e9, kf.ALL)
+        assert status == 1
+
+
+def test_persistent_rejections_reset_the_hard_iron() -> None:
+    """A sample 17 deg off with a 0.6 deg sigma and a tight hard iron fails the gate: MAG_RESET_AFTER - 1
+    rejections change nothing but the count; the next resets the hard iron's rows and columns of P to its
+    initial variance ``incl[4]`` (status 2) and the count; an accepted sample clears the count; with no
+    initial variance (not estimated) there is never a reset."""
+    s, P, bias, incl, m_b = _mag_setup(off_deg=17.0)
+    for i in range(3):
+        P[em.X_MB + i, em.X_MB + i] = 1e-8
+    P[em.X_PHI + 2, em.X_MB + 1] = P[em.X_MB + 1, em.X_PHI + 2] = 1e-7
+    incl[4] = 0.04
+    P0 = P.copy()
+    args = (np.zeros(3), 0.0, 0.05, 0.01, math.nan, math.nan, math.nan, 5.0, kf.ALL)
+    for k in range(aided.MAG_RESET_AFTER - 1):
+        assert aided.apply_mag(s, CFG_LAB, bias, P, incl, m_b, *args)[0] == 0
+        assert incl[3] == k + 1
+    np.testing.assert_array_equal(P, P0)
+    assert aided.apply_mag(s, CFG_LAB, bias, P, incl, m_b, *args)[0] == 2 and incl[3] == 0.0
+    want = P0.copy()
+    want[em.X_MB:em.X_MB + 3, :] = 0.0
+    want[:, em.X_MB:em.X_MB + 3] = 0.0
+    for i in range(3):
+        want[em.X_MB + i, em.X_MB + i] = 0.04
+    np.testing.assert_array_equal(P, want)
+    # an accepted sample clears the count: the hard iron (now 0.2 sigma) explains the 17 deg
+    incl[3] = 7.0
+    assert aided.apply_mag(s, CFG_LAB, bias, P, incl, m_b, *args)[0] == 1 and incl[3] == 0.0
+    s, P, bias, incl, m_b = _mag_setup(off_deg=17.0)
+    for i in range(3):
+        P[em.X_MB + i, em.X_MB + i] = 1e-8
+    P0 = P.copy()
+    for _ in range(aided.MAG_RESET_AFTER + 3):
+        assert aided.apply_mag(s, CFG_LAB, bias, P, incl, m_b, *args)[0] == 0
+    np.testing.assert_array_equal(P, P0)
