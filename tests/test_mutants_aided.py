@@ -841,6 +841,10 @@ def test_module_level_names_and_kinds() -> None:
     assert (aided.K_GNSS_POS, aided.K_GNSS_VEL, aided.K_BARO, aided.K_MAG, aided.K_ZUPT, aided.K_ZARU,
             aided.K_MAG_DISTURBED) == tuple(range(7))
     assert aided.KIND_NAMES == ("gnss_pos", "gnss_vel", "baro", "mag", "zupt", "zaru", "mag_disturbed")
+    # the magnetometer's checks (PX4 EKF2's EKF2_MAG_CHK_INC 20 deg, EKF2_MAG_CHK_STR 0.2 gauss) and reset
+    assert aided.MAG_INCL_GATE == math.radians(20.0) and aided.MAG_STRENGTH_GATE == 0.2
+    assert aided.MAG_RESET_AFTER == 50 and kf.MAG_STATS == 5 and aided.ACC_SIZE == 19
+    assert aided.ROW_SIZE == 35 + 18 and aided.STATE_BLOCKS == ("SG", "SA", "MB")
     assert aided.GNSS_COLUMNS == ("t", "lat", "lon", "h", "vn", "ve", "vd", "sigma_h", "sigma_v", "sigma_vel")
     assert aided.BARO_COLUMNS == ("t", "h", "sigma") and aided.MAG_COLUMNS == ("t", "mx", "my", "mz", "sigma")
     assert aided.STATIC_COLUMNS == ("t0", "t1", "sigma_v", "sigma_w")

@@ -280,3 +280,41 @@ def test_persistent_rejections_reset_the_hard_iron() -> None:
     for _ in range(aided.MAG_RESET_AFTER + 3):
         assert aided.apply_mag(s, CFG_LAB, bias, P, incl, m_b, *args)[0] == 0
     np.testing.assert_array_equal(P, P0)
+
+
+def test_the_disturbance_checks_are_strict_and_use_the_whole_horizontal_field() -> None:
+    """Exactly at a gate is not disturbed (binary-exact values: |m| = 1.25 against 1 with a 0.25 gate; an
+    inclination of exactly 45 deg against 0 with a 45 deg gate); the horizontal part is the root of both
+    horizontal components (a field along east, or split between north and east, is no different)."""
+    m = np.array([0.0, 0.75, 1.0])
+    assert not kf.mag_disturbed(m, math.nan, 1.0, 1.0, 0.25)
+    assert kf.mag_disturbed(m, math.nan, 1.0, 1.0, 0.25 - 1e-12)
+    m = np.array([0.0, 1.0, 1.0])
+    assert not kf.mag_disturbed(m, 0.0, math.nan, math.atan2(1.0, 1.0), 1.0)
+    assert kf.mag_disturbed(m, 0.0, math.nan, math.atan2(1.0, 1.0) - 1e-12, 1.0)
+    for m in (np.array([0.3, 0.4, 0.5 * math.tan(math.radians(60.0))]), np.array([0.4, 0.3, 0.5 * math.tan(1.047)])):
+        assert not kf.mag_disturbed(m, math.radians(60.0), 1.0, math.radians(1.0), 0.1)  # |m_h| = 0.5, |m| = 1
+        assert kf.mag_disturbed(m, math.radians(58.0), 1.0, math.radians(1.0), 0.1)
+        assert kf.mag_disturbed(m, math.radians(60.0), 1.15, math.radians(1.0), 0.1)
+
+
+def test_the_scale_factors_are_estimated_only_when_asked() -> None:
+    """errmodel.spec_of: a grade's scale factors (consumer 10000/3 and 10000 ppm) and a spec's ``gyro_scale``/
+    ``accel_scale`` keys (ppm) reach the filter only with ``scale_factors`` (``--scale-factors``); one key
+    suffices, none is refused with one line; an ImuSpec is taken as it is."""
+    assert (em.spec_of("consumer").gyro_scale, em.spec_of("consumer").accel_scale) == (0.0, 0.0)
+    on = em.spec_of("consumer", True)
+    assert on.gyro_scale == pytest.approx(1e-2 / 3.0, rel=1e-12) and on.accel_scale == pytest.approx(1e-2, rel=1e-12)
+    keys = {"gyro_arw": 0.1, "gyro_scale": 100.0, "accel_scale": 250.0}
+    off = em.spec_of(keys)
+    assert (off.gyro_scale, off.accel_scale) == (0.0, 0.0) and off.gyro_arw > 0.0
+    on = em.spec_of(keys, True)
+    assert (on.gyro_scale, on.accel_scale) == pytest.approx((1e-4, 2.5e-4), rel=1e-12)
+    assert em.spec_of({"gyro_scale": 100.0}, True).gyro_scale == pytest.approx(1e-4, rel=1e-12)
+    assert em.spec_of({"accel_scale": 100.0}, True).accel_scale == pytest.approx(1e-4, rel=1e-12)
+    with pytest.raises(ValueError, match=r"^--scale-factors with an IMU spec needs gyro_scale and/or accel_scale"):
+        em.spec_of({"gyro_arw": 0.1}, True)
+    spec = em.ImuSpec(gyro_scale=1e-3)
+    assert em.spec_of(spec) is spec and em.spec_of(spec, True) is spec
+    sp = em.make_spec("industrial", scale_factors=True)
+    assert sp[em.SP_GYRO_SCALE] == pytest.approx(1e-3, rel=1e-12) and sp[em.SP_ACC_SCALE] == pytest.approx(1e-3)
