@@ -38,6 +38,8 @@ GNSS_SIGMA_V = 5.0  # m
 GNSS_SIGMA_VEL = 0.3  # m/s
 BARO_SIGMA_M = 0.5  # m: barometric height 1-sigma (docs/conventions.md baro default)
 GNSS_MAX_SIGMA = 50.0  # m: a fix claiming a worse 1-sigma accuracy is rejected (docs/filter.md)
+GNSS_HEIGHT_RANGE = (-1000.0, 50000.0)  # m, ellipsoidal: below the Dead Sea's shore, above stratospheric balloons
+GNSS_MAX_SPEED = 600.0  # m/s horizontal: above the receivers' export limit (1,000 knots, 514 m/s)
 GPS_FIX_3D, GPS_FIX_PPP = 3, 8  # GPS_FIX_TYPE: 3D fix .. PPP are fixes; other values carry no fix
 
 
@@ -273,12 +275,16 @@ def gnss_heading(msg: object) -> tuple[float, float] | None:
 
 def gnss_invalid(fix: tuple) -> str | None:
     """Why a decoded fix cannot be used (``"out_of_range"``, ``"inaccurate"``), or None: latitude
-    and longitude within their ranges, every value finite (a NaN vertical velocity means "not
-    measured": ground speed and course), accuracies at most GNSS_MAX_SIGMA."""
+    and longitude within their ranges, the height within GNSS_HEIGHT_RANGE and the horizontal speed
+    at most GNSS_MAX_SPEED, every value finite (a NaN vertical velocity means "not measured": ground
+    speed and course), accuracies at most GNSS_MAX_SIGMA."""
     _, lat, lon, h, vel, sig_h, sig_v, sig_vel = fix
     values = (lat, lon, h, sig_h, sig_v, sig_vel, *(vel[:2] if vel else ()))  # vel[2] NaN: horizontal only
     if not all(math.isfinite(v) for v in values) or abs(lat) > 90.0 or abs(lon) > 180.0 \
             or (vel is not None and math.isinf(vel[2])):
+        return "out_of_range"
+    if not GNSS_HEIGHT_RANGE[0] <= h <= GNSS_HEIGHT_RANGE[1] or \
+            (vel is not None and math.hypot(vel[0], vel[1]) > GNSS_MAX_SPEED):
         return "out_of_range"
     if not (0.0 < sig_h <= GNSS_MAX_SIGMA and 0.0 < sig_v <= GNSS_MAX_SIGMA and sig_vel > 0.0):
         return "inaccurate"

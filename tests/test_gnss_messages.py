@@ -20,9 +20,23 @@ def _decoded(msg: object) -> object:
     return mavlink.MAVLink(None).decode(bytearray(msg.pack(ENC)))  # type: ignore[attr-defined]
 
 
-def _raw(fix_type: int = 3, lat: int = LAT, lon: int = LON, h_acc: int = 0, v_acc: int = 0) -> object:
-    return _decoded(ENC.gps_raw_int_encode(5_000_000, fix_type, lat, lon, 488000, 80, 120, 0, 0, 12,
-                                           alt_ellipsoid=0, h_acc=h_acc, v_acc=v_acc))
+def _raw(fix_type: int = 3, lat: int = LAT, lon: int = LON, h_acc: int = 0, v_acc: int = 0, alt_e: int = 0,
+         vel: int = 0) -> object:
+    return _decoded(ENC.gps_raw_int_encode(5_000_000, fix_type, lat, lon, 488000, 80, 120, vel, 0, 12,
+                                           alt_ellipsoid=alt_e, h_acc=h_acc, v_acc=v_acc))
+
+
+@pytest.mark.parametrize("alt_e, vel, ok", [
+    (-1_000_000, 0, True), (50_000_000, 0, True), (-1_000_001, 0, False), (50_000_001, 0, False),
+    (2_147_483_646, 0, False), (0, 60_000, True), (0, 60_001, False),
+])
+def test_heights_and_speeds_no_vehicle_reaches_are_out_of_range(alt_e: int, vel: int, ok: bool) -> None:
+    """Ellipsoidal height (GPS_RAW_INT alt_ellipsoid, mm) within -1,000 .. 50,000 m and ground speed (cm/s) at
+    most 600 m/s (above the receivers' 1,000-knot export limit): a fix; beyond either, ``out_of_range`` (a
+    random GPS_RAW_INT in the vehicle's name, as the ingest fuzz test sends, is then refused before the filter)."""
+    fix = gnss_fix(_raw(alt_e=alt_e, vel=vel), geoid_height=0.0)
+    assert fix is not None
+    assert (gnss_invalid(fix) is None) is ok, (fix, gnss_invalid(fix))
 
 
 @pytest.mark.parametrize("fix_type", [3, 4, 5, 6, 7, 8])
