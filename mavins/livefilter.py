@@ -192,7 +192,7 @@ class LiveFilter:
         kalman.correct_gyro, ``(w - b) / (1 + s)``, without building arrays (once per attitude update)."""
         b = self.bias.tolist()
         g, m, k = kalman.B_BG, kalman.B_GG, kalman.B_SG
-        return tuple((w[i] - (b[g + i] + b[m + i]) * 1.0) / (1.0 + b[k + i]) for i in range(3))  # type: ignore[return-value]
+        return tuple((w[i] - (b[g + i] + b[m + i])) / (1.0 + b[k + i]) for i in range(3))  # type: ignore[return-value]
 
     @property
     def accel_bias(self) -> np.ndarray:

@@ -163,7 +163,9 @@ class AidingFiles:
         if self.mag_unit is not None:
             per_nt = MAG_UNITS[self.mag_unit]
             out["mag_strength"] = f.intensity * per_nt
-            out["mag_strength_gate"] = 0.2e5 * per_nt  # PX4's 0.2 gauss (aided.MAG_STRENGTH_GATE)
+            from .core.aided import MAG_STRENGTH_GATE
+
+            out["mag_strength_gate"] = MAG_STRENGTH_GATE / MAG_UNITS["gauss"] * per_nt  # gauss -> nT -> the file's
         return out
 
 
@@ -309,7 +311,7 @@ def run_nav_aided(imu_path: Path, init_path: Path, out_path: Path, opts: NavOpti
         raise files.DataFileError(str(exc)) from None
     t_compute = time.perf_counter() - t_start - t_read
     with files.atomic_output(out_path) as tmp:
-        keep = aided.file_columns(aided.em.make_spec(spec, scale_factors=aiding.scale_factors), aiding.mag_bias)
+        keep = aided.file_columns(stats["spec"], aiding.mag_bias)
         files.write_table(tmp, tuple(aided.ROW_COLUMNS[i] for i in keep), rows[:, keep])
     t_write = time.perf_counter() - t_start - t_read - t_compute
     if opts.timing:

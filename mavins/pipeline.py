@@ -9,7 +9,6 @@ it looks at the wall clock, so live and replayed input give identical output.
 from __future__ import annotations
 
 import functools
-
 import logging
 import math
 from collections import Counter

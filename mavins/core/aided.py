@@ -35,7 +35,7 @@ are skipped):
 * mag ``t, mx, my, mz (body FRD, any unit), sigma (rad)``: heading through
   kalman.mag_heading with the given declination, less the hard-iron
   estimate (state X_MB, estimated when its initial sigma is above 0); a
-  sample whose inclination disagrees with the model's (``mag_model``) by
+  sample whose inclination disagrees with the model's (``mag_incl``) by
   more than MAG_INCL_GATE is counted disturbed (kind ``mag_disturbed``) and
   not applied (:func:`apply_mag`, the live path's too);
 * static ``t0, t1, sigma_v (m/s), sigma_w (rad/s)``: at rest in [t0, t1]:
@@ -94,6 +94,7 @@ STATE_BLOCKS = ("SG", "SA", "MB")  # errmodel.STATE blocks written after the con
 STATE_COLUMNS = tuple(f"{p}{b.lower()}_{a}" for b in STATE_BLOCKS for p in ("", "sigma_") for a in "xyz")
 ROW_COLUMNS = OUT_COLUMNS + STATE_COLUMNS
 ROW_SIZE = len(ROW_COLUMNS)
+_STATE_BLOCK_X = tuple(em.OFFSET[b] for b in STATE_BLOCKS)  # their first indices in the error state
 ACC_SIZE = 19  # the pending propagation: sum C T (9), f^n T (3), T, angle and velocity increments (body, 3 + 3)
 MAG_INCL_GATE = math.radians(20.0)  # rad: a sample whose inclination differs more from the model's is disturbed
 MAG_RESET_AFTER = 50  # consecutive rejected magnetometer samples after which the hard iron is reset (apply_mag)
@@ -300,7 +301,7 @@ def filter_row(P: np.ndarray, bias: np.ndarray, out: np.ndarray) -> None:
     21, then, when ``out`` has ROW_SIZE values, each STATE_BLOCKS block's estimate and 1-sigma."""
     k = OUT_SIZE
     if out.shape[0] >= ROW_SIZE:  # a row of the contract's 35 columns only has no room for them
-        for x0 in (em.X_SG, em.X_SA, em.X_MB):
+        for x0 in _STATE_BLOCK_X:
             for i in range(3):
                 out[k + i] = bias[x0 - em.X_SENSORS + i]
                 out[k + 3 + i] = np.sqrt(max(P[x0 + i, x0 + i], 0.0))
@@ -624,7 +625,7 @@ def navigate_aided(
         ``(rows, stats)``: (M, ROW_SIZE) output rows (:func:`file_columns` picks a file's), and ``counts`` (kind ->
         (accepted, rejected)), ``nis`` (log rows, LOG_COLUMNS), ``P`` (final),
         ``bias`` (kalman.B_* layout), ``baro_offset`` (m), ``P_history``,
-        ``state`` (s).
+        ``state`` (s), ``spec`` (the process-model vector used).
     """
     cfg = sd.make_config(samples=samples, **options)
     if predict_every < 1:
@@ -683,6 +684,7 @@ def navigate_aided(
         "baro_offset": float(bias[kf.B_BARO]),
         "P_history": p_hist[: rows // p_every] if covariance_every > 0 else p_hist,
         "state": s,
+        "spec": sp,
     }
     return (to_file_units(result) if file_units else result), stats
 
