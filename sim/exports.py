@@ -9,7 +9,8 @@ C = "f8[:, :, ::1]"
 
 EXPORTS = (
     Export("kinematics", "integrate",
-           f"none(f8, {V}, i8, f8, f8, f8, {M}, {M}, {C}, i8[::1], {M}, {V}, {M}, b1, {V}, {M}, {M}, {M})"),
+           f"none(f8, {V}, i8, {V}, {V}, f8, f8, f8, {M}, {M}, {C}, i8[::1], {M}, {V}, {M}, b1, {V}, {M}, {M}, {M}, {M})"),
+    Export("kinematics", "euler_rows", f"none({M}, {M})"),
     Export("kinematics", "truth", f"none({V}, {M}, {M}, {C}, i8[::1], {M}, {V}, {M}, {M})"),
     Export("kinematics", "channel_eval", f"UniTuple(f8, 2)({V}, {V}, {M}, i8, f8)"),
 )

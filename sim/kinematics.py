@@ -19,11 +19,14 @@ IMU rates follow the navigation equations the strapdown core inverts
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from mavins.core import earth
 from mavins.core.jit import kernel
-from mavins.core.rotation import cross, dcm_to_quat, euler_to_dcm, mat_mul, mat_vec, quat_conj, quat_mul, quat_to_dcm, rotvec_to_dcm
+from mavins.core.rotation import (Mat9, dcm_to_quat_s, euler_to_dcm_s, mat3_mul_s, mat3t_vec_s, quat_mul_s,
+                                   quat_to_dcm_s, quat_to_euler, rotvec_to_dcm_s)
 
 CH_ROLL, CH_PITCH, CH_YAW, CH_SPEED, CH_VD, CH_TT1, CH_TT2 = range(7)
 N_CHANNELS = 7
@@ -31,11 +34,15 @@ N_CHANNELS = 7
 # consts vector: coning half-angle (rad), coning rate (rad/s), laboratory gravity (m/s^2)
 K_BETA, K_WCONE, K_GLAB = range(3)
 
-# Gauss-Legendre 5-point nodes and weights on [0, 1].
-_GL_X = np.array([-0.9061798459386640, -0.5384693101056831, 0.0, 0.5384693101056831, 0.9061798459386640])
-_GL_W = np.array([0.2369268850561891, 0.4786286704993665, 0.5688888888888889, 0.4786286704993665, 0.2369268850561891])
-GL_NODES = 0.5 * (_GL_X + 1.0)
-GL_WEIGHTS = 0.5 * _GL_W
+
+def gauss_legendre(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Nodes and weights of the n-point Gauss-Legendre rule on [0, 1]."""
+    x, w = np.polynomial.legendre.leggauss(n)
+    return 0.5 * (x + 1.0), 0.5 * w
+
+
+# The 5-point rule: the floor of quadrature_order, and sim.polar's.
+GL_NODES, GL_WEIGHTS = gauss_legendre(5)
 
 
 @kernel
@@ -64,9 +71,11 @@ def channel_eval(starts: np.ndarray, durs: np.ndarray, coefs: np.ndarray, count:
 
 
 @kernel
-def right_jacobian_rate(phi: np.ndarray, phidot: np.ndarray) -> np.ndarray:
-    """Body rate of ``exp([phi x])``: ``J_r(phi) phi'`` (Bortz 1971)."""
-    a2 = phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2]
+def right_jacobian_rate_s(px: float, py: float, pz: float, dx: float, dy: float, dz: float
+                          ) -> tuple[float, float, float]:
+    """Body rate of ``exp([phi x])``: ``J_r(phi) phi' = phi' - b1 phi x phi' + b2 phi x (phi x phi')``,
+    ``b1 = (1 - cos a)/a^2``, ``b2 = (a - sin a)/a^3`` (Bortz 1971; series below 1e-6 rad)."""
+    a2 = px * px + py * py + pz * pz
     if a2 < 1e-12:
         b1 = 0.5 - a2 / 24.0
         b2 = 1.0 / 6.0 - a2 / 120.0
@@ -74,84 +83,124 @@ def right_jacobian_rate(phi: np.ndarray, phidot: np.ndarray) -> np.ndarray:
         a = np.sqrt(a2)
         b1 = (1.0 - np.cos(a)) / a2
         b2 = (a - np.sin(a)) / (a2 * a)
-    c1 = cross(phi, phidot)
-    return phidot - b1 * c1 + b2 * cross(phi, c1)
+    c1x, c1y, c1z = py * dz - pz * dy, pz * dx - px * dz, px * dy - py * dx
+    c2x, c2y, c2z = py * c1z - pz * c1y, pz * c1x - px * c1z, px * c1y - py * c1x
+    return dx - b1 * c1x + b2 * c2x, dy - b1 * c1y + b2 * c2y, dz - b1 * c1z + b2 * c2z
+
+
+# Sums of the superposed sinusoids at one instant (vib_sums): angular vibration phi (rad) and its
+# rate (rad/s), linear vibration's NED velocity (m/s) and acceleration (m/s^2).
+VS_PHI, VS_PHID, VS_VEL, VS_ACC = 0, 3, 6, 9
+VS_SIZE = 12
 
 
 @kernel
-def vehicle_state(
-    t: float, starts: np.ndarray, durs: np.ndarray, coefs: np.ndarray, counts: np.ndarray, linvib: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Vehicle Euler angles, their rates, NED velocity and acceleration at t."""
-    e = np.empty(3)
-    ed = np.empty(3)
-    for i in range(3):
-        e[i], ed[i] = channel_eval(starts[i], durs[i], coefs[i], counts[i], t)
-    spd, spd_d = channel_eval(starts[CH_SPEED], durs[CH_SPEED], coefs[CH_SPEED], counts[CH_SPEED], t)
-    vd, vd_d = channel_eval(starts[CH_VD], durs[CH_VD], coefs[CH_VD], counts[CH_VD], t)
-    cy, sy = np.cos(e[2]), np.sin(e[2])
-    v = np.empty(3)
-    a = np.empty(3)
-    v[0] = spd * cy
-    v[1] = spd * sy
-    v[2] = vd
-    a[0] = spd_d * cy - spd * ed[2] * sy
-    a[1] = spd_d * sy + spd * ed[2] * cy
-    a[2] = vd_d
+def sine_terms(vib: np.ndarray, linvib: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Coefficients of each sinusoid's cosine and sine in the vibration sums.
+
+    Rows of ``vib``/``linvib``: amplitude x, y, z, angular frequency w (rad/s), phase p (rad).
+    Angular (rows of the first result): ``phi = sum A sin(w t + p)`` [A], ``phi' = sum A w cos(w t + p)``
+    [A w]; linear (second): ``v = -sum A/w cos(w t + p)`` [-A/w], ``a = sum A sin(w t + p)`` [A],
+    displacement ``-sum A/w^2 sin(w t + p)`` [-A/w^2] (v and displacement: the integrals of a).
+    """
+    ta = np.empty((vib.shape[0], 6))
+    for k in range(vib.shape[0]):
+        for i in range(3):
+            ta[k, i] = vib[k, i]
+            ta[k, 3 + i] = vib[k, i] * vib[k, 3]
+    tl = np.empty((linvib.shape[0], 9))
     for k in range(linvib.shape[0]):
         w = linvib[k, 3]
-        ph = w * t + linvib[k, 4]
         for i in range(3):
-            v[i] += -linvib[k, i] / w * np.cos(ph)
-            a[i] += linvib[k, i] * np.sin(ph)
-    return e, ed, v, a
+            tl[k, i] = -linvib[k, i] / w
+            tl[k, 3 + i] = linvib[k, i]
+            tl[k, 6 + i] = -linvib[k, i] / (w * w)
+    return ta, tl
 
 
 @kernel
-def perturbation(t: float, vib: np.ndarray, consts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """DCM ``C_p^v`` and body rate (rad/s) of the angular perturbations at t.
-
-    Angular vibration ``exp(phi(t))``, then classic coning relative to its
-    start: ``q_c(0)^-1 (x) q_c(t)`` with the cone rate of sim.motion.classic_coning.
-    """
-    phi = np.zeros(3)
-    phid = np.zeros(3)
+def vib_sums(t: float, vib: np.ndarray, linvib: np.ndarray, out: np.ndarray) -> None:
+    """The vibration sums at t into ``out`` (VS_* slots, sine_terms), each phase evaluated directly."""
+    ta, tl = sine_terms(vib, linvib)
+    out[:] = 0.0
     for k in range(vib.shape[0]):
-        w = vib[k, 3]
-        ph = w * t + vib[k, 4]
-        s, c = np.sin(ph), np.cos(ph)
-        for i in range(3):
-            phi[i] += vib[k, i] * s
-            phid[i] += vib[k, i] * w * c
-    c_p = rotvec_to_dcm(phi)
-    w_p = right_jacobian_rate(phi, phid)
+        ph = vib[k, 3] * t + vib[k, 4]
+        _add_angular(ta, k, np.cos(ph), np.sin(ph), out)
+    for k in range(linvib.shape[0]):
+        ph = linvib[k, 3] * t + linvib[k, 4]
+        _add_linear(tl, k, np.cos(ph), np.sin(ph), out)
+
+
+@kernel
+def _add_angular(ta: np.ndarray, k: int, c: float, s: float, out: np.ndarray) -> None:
+    """Add angular sinusoid k (sine_terms row), given the cosine and sine of its phase, to phi and phi'."""
+    for i in range(3):
+        out[VS_PHI + i] += ta[k, i] * s
+        out[VS_PHID + i] += ta[k, 3 + i] * c
+
+
+@kernel
+def _add_linear(tl: np.ndarray, k: int, c: float, s: float, out: np.ndarray) -> None:
+    """Add linear sinusoid k (sine_terms row), given the cosine and sine of its phase, to velocity and
+    acceleration."""
+    for i in range(3):
+        out[VS_VEL + i] += tl[k, i] * c
+        out[VS_ACC + i] += tl[k, 3 + i] * s
+
+
+@kernel
+def vehicle_s(t: float, starts: np.ndarray, durs: np.ndarray, coefs: np.ndarray, counts: np.ndarray, vs: np.ndarray
+              ) -> tuple[float, float, float, float, float, float, float, float, float, float, float, float]:
+    """Vehicle roll, pitch, yaw (rad), their rates (rad/s), NED velocity (m/s) and acceleration
+    (m/s^2) at t, the linear vibration's from ``vs`` (VS_VEL, VS_ACC) added.
+
+    ``v = [V cos psi, V sin psi, v_D]``, ``a = [V' cos psi - V psi' sin psi, V' sin psi + V psi' cos psi, v_D']``.
+    """
+    r, rd = channel_eval(starts[CH_ROLL], durs[CH_ROLL], coefs[CH_ROLL], counts[CH_ROLL], t)
+    p, pd = channel_eval(starts[CH_PITCH], durs[CH_PITCH], coefs[CH_PITCH], counts[CH_PITCH], t)
+    y, yd = channel_eval(starts[CH_YAW], durs[CH_YAW], coefs[CH_YAW], counts[CH_YAW], t)
+    spd, spd_d = channel_eval(starts[CH_SPEED], durs[CH_SPEED], coefs[CH_SPEED], counts[CH_SPEED], t)
+    vd, vd_d = channel_eval(starts[CH_VD], durs[CH_VD], coefs[CH_VD], counts[CH_VD], t)
+    cy, sy = np.cos(y), np.sin(y)
+    return (r, p, y, rd, pd, yd,
+            spd * cy + vs[VS_VEL], spd * sy + vs[VS_VEL + 1], vd + vs[VS_VEL + 2],
+            spd_d * cy - spd * yd * sy + vs[VS_ACC], spd_d * sy + spd * yd * cy + vs[VS_ACC + 1],
+            vd_d + vs[VS_ACC + 2])
+
+
+@kernel
+def perturbation_s(t: float, vs: np.ndarray, consts: np.ndarray) -> tuple[Mat9, float, float, float]:
+    """DCM ``C_p^v`` (row-major 9-tuple) and body rate (rad/s) of the angular perturbations at t.
+
+    Angular vibration ``exp(phi(t))`` (phi, phi' from ``vs``), then classic coning relative to
+    its start: ``q_c(0)^-1 (x) q_c(t)`` with the cone rate of sim.motion.classic_coning.
+    """
+    px, py, pz = vs[VS_PHI], vs[VS_PHI + 1], vs[VS_PHI + 2]
+    c_p = rotvec_to_dcm_s(px, py, pz)
+    wx, wy, wz = right_jacobian_rate_s(px, py, pz, vs[VS_PHID], vs[VS_PHID + 1], vs[VS_PHID + 2])
     beta, wc = consts[K_BETA], consts[K_WCONE]
     if beta != 0.0:
         # q_c(t) = [cos b/2, sin b/2 cos wt, sin b/2 sin wt, 0], taken relative to t = 0
         hb = 0.5 * beta
-        q0 = np.array([np.cos(hb), np.sin(hb), 0.0, 0.0])
-        qt = np.array([np.cos(hb), np.sin(hb) * np.cos(wc * t), np.sin(hb) * np.sin(wc * t), 0.0])
-        c_c = quat_to_dcm(quat_mul(quat_conj(q0), qt))
+        ch, sh = np.cos(hb), np.sin(hb)
+        c_c = quat_to_dcm_s(quat_mul_s((ch, -sh, 0.0, 0.0), (ch, sh * np.cos(wc * t), sh * np.sin(wc * t), 0.0)))
         sb = np.sin(beta)
-        w_c = np.array([-wc * sb * np.sin(wc * t), wc * sb * np.cos(wc * t), -wc * (1.0 - np.cos(beta))])
-        w_p = mat_vec(c_c.T, w_p) + w_c
-        c_p = mat_mul(c_p, c_c)
-    return c_p, w_p
+        ux, uy, uz = mat3t_vec_s(c_c, wx, wy, wz)
+        wx = ux - wc * sb * np.sin(wc * t)
+        wy = uy + wc * sb * np.cos(wc * t)
+        wz = uz - wc * (1.0 - np.cos(beta))
+        c_p = mat3_mul_s(c_p, c_c)
+    return c_p, wx, wy, wz
 
 
 @kernel
-def turntable(t: float, starts: np.ndarray, durs: np.ndarray, coefs: np.ndarray, counts: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
-    """``C_s^v = Rz(a1) Rx(a2)``, the IMU's rate relative to the vehicle (in s), angles a1, a2."""
+def turntable_s(t: float, starts: np.ndarray, durs: np.ndarray, coefs: np.ndarray, counts: np.ndarray
+                ) -> tuple[Mat9, float, float, float, float, float]:
+    """``C_s^v = Rz(a1) Rx(a2)`` (9-tuple), the IMU's rate relative to the vehicle (in s), angles a1, a2."""
     a1, r1 = channel_eval(starts[CH_TT1], durs[CH_TT1], coefs[CH_TT1], counts[CH_TT1], t)
     a2, r2 = channel_eval(starts[CH_TT2], durs[CH_TT2], coefs[CH_TT2], counts[CH_TT2], t)
-    c = euler_to_dcm(a2, 0.0, a1)
     # rate of Rz(a1) Rx(a2) in s: Rx(a2)^T [0, 0, r1] + [r2, 0, 0]
-    w = np.empty(3)
-    ca, sa = np.cos(a2), np.sin(a2)
-    w[0] = r2
-    w[1] = sa * r1
-    w[2] = ca * r1
-    return c, w, a1, a2
+    return euler_to_dcm_s(a2, 0.0, a1), r2, np.sin(a2) * r1, np.cos(a2) * r1, a1, a2
 
 
 @kernel
@@ -168,35 +217,139 @@ def imu_rates(
     linvib: np.ndarray,
     use_earth: bool,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """True ``w_is^s`` (rad/s) and ``f^s`` (m/s^2) of the IMU at t, latitude, height."""
-    e, ed, v, a = vehicle_state(t, starts, durs, coefs, counts, linvib)
-    c_vn = euler_to_dcm(e[0], e[1], e[2])
-    sr, cr = np.sin(e[0]), np.cos(e[0])
-    sp, cp = np.sin(e[1]), np.cos(e[1])
-    w_nv = np.empty(3)
-    w_nv[0] = ed[0] - ed[2] * sp
-    w_nv[1] = ed[1] * cr + ed[2] * sr * cp
-    w_nv[2] = -ed[1] * sr + ed[2] * cr * cp
+    """True ``w_is^s`` (rad/s) and ``f^s`` (m/s^2) of the IMU at t, latitude, height (rates_s)."""
+    vs = np.empty(VS_SIZE)
+    vib_sums(t, vib, linvib, vs)
+    r = rates_s(t, lat, h, starts, durs, coefs, counts, vs, consts, use_earth)
+    return np.array([r[0], r[1], r[2]]), np.array([r[3], r[4], r[5]])
+
+
+@kernel
+def rates_s(
+    t: float, lat: float, h: float, starts: np.ndarray, durs: np.ndarray, coefs: np.ndarray, counts: np.ndarray,
+    vs: np.ndarray, consts: np.ndarray, use_earth: bool,
+) -> tuple[float, float, float, float, float, float]:
+    """``w_is^s`` and ``f^s`` at t given the vibration sums ``vs`` there ([TW11] 11.1, inverted):
+    ``w_iv = w_nv + C_n^v (w_ie + w_en)``, ``f^v = C_n^v (a + (2 w_ie + w_en) x v - g)``, then
+    through the perturbation and the turntable. Allocation-free (tuples)."""
+    r, p, y, rd, pd, yd, vn, ve, vd, an, ae, ad = vehicle_s(t, starts, durs, coefs, counts, vs)
+    c_vn = euler_to_dcm_s(r, p, y)
+    sr, cr = np.sin(r), np.cos(r)
+    sp, cp = np.sin(p), np.cos(p)
+    # body rate from the Euler rates (ZYX)
+    wnx = rd - yd * sp
+    wny = pd * cr + yd * sr * cp
+    wnz = -pd * sr + yd * cr * cp
     if use_earth:
-        w_ie = earth.earth_rate_n(lat)
-        w_en = earth.transport_rate(lat, h, v)
-        g = earth.gravity(lat, h)
+        kn, ke, kt, ien, ied, g = earth.nav_terms(lat, h)
+        enx, eny, enz = ve * ke, -vn * kn, -ve * kt  # earth.transport_rate_s
     else:
-        w_ie = np.zeros(3)
-        w_en = np.zeros(3)
-        g = consts[K_GLAB]
-    c_nv = c_vn.T
-    w_iv = w_nv + mat_vec(c_nv, w_ie + w_en)
-    acc = a + cross(2.0 * w_ie + w_en, v)
-    acc[2] -= g
-    f_v = mat_vec(c_nv, acc)
-    c_pv, w_p = perturbation(t, vib, consts)
-    w_ip = mat_vec(c_pv.T, w_iv) + w_p
-    f_p = mat_vec(c_pv.T, f_v)
-    c_sp, w_t, _, _ = turntable(t, starts, durs, coefs, counts)
-    w_is = mat_vec(c_sp.T, w_ip) + w_t
-    f_s = mat_vec(c_sp.T, f_p)
-    return w_is, f_s
+        ien, ied, g = 0.0, 0.0, consts[K_GLAB]
+        enx, eny, enz = 0.0, 0.0, 0.0
+    ux, uy, uz = mat3t_vec_s(c_vn, ien + enx, eny, ied + enz)
+    wvx, wvy, wvz = wnx + ux, wny + uy, wnz + uz
+    ox, oy, oz = 2.0 * ien + enx, eny, 2.0 * ied + enz
+    fx, fy, fz = mat3t_vec_s(c_vn, an + oy * vd - oz * ve, ae + oz * vn - ox * vd, ad + ox * ve - oy * vn - g)
+    c_pv, wpx, wpy, wpz = perturbation_s(t, vs, consts)
+    wx, wy, wz = mat3t_vec_s(c_pv, wvx, wvy, wvz)
+    fx, fy, fz = mat3t_vec_s(c_pv, fx, fy, fz)
+    c_sp, wtx, wty, wtz, _, _ = turntable_s(t, starts, durs, coefs, counts)
+    wx, wy, wz = mat3t_vec_s(c_sp, wx + wpx, wy + wpy, wz + wpz)
+    fx, fy, fz = mat3t_vec_s(c_sp, fx, fy, fz)
+    return wx + wtx, wy + wty, wz + wtz, fx, fy, fz
+
+
+# Rotations of the sinusoids' phasors kept between sample intervals (integrate): one set per distinct
+# sub-step length, looked up by its exact value, so a cached rotation is the one computed afresh.
+N_ROT_CACHE = 4
+
+# Largest relative quadrature error allowed on a sinusoid over one sub-step (quadrature_order).
+QUADRATURE_TOL = 1e-15
+
+
+def quadrature_order(wh: float, tol: float = QUADRATURE_TOL) -> int:
+    """Fewest Gauss-Legendre nodes (5 .. 40) that integrate ``sin(W t)`` over a step h with ``wh = W h``
+    to ``tol`` relative to ``A h``.
+
+    Remainder of the n-point rule on [0, h] ([AS64] 25.4.30, mapped from [-1, 1]):
+    ``h^(2n+1) (n!)^4 / ((2n+1) ((2n)!)^3) f^(2n)``, and ``|f^(2n)| <= A W^(2n)`` for ``A sin(W t)``.
+    """
+    for n in range(5, 41):  # in logarithms: (2n)!^3 overflows a double from n = 29
+        log_c = 4.0 * math.lgamma(n + 1) - math.log(2 * n + 1) - 3.0 * math.lgamma(2 * n + 1)
+        if wh <= 0.0 or log_c + 2 * n * math.log(wh) <= math.log(tol):
+            return n
+    raise ValueError(f"W h = {wh:g} rad per sub-step needs more than 40 quadrature nodes (raise substeps)")
+
+
+@kernel
+def _rotations(w: np.ndarray, hstep: float, nodes: np.ndarray, rot: np.ndarray) -> None:
+    """cos and sin of ``w hstep`` (rot[:, 0:2]) and of ``w x_g hstep`` at the quadrature nodes x_g
+    (rot[:, 2 + 2 g : 4 + 2 g]) for each angular frequency w (rad/s)."""
+    for k in range(w.shape[0]):
+        a = w[k] * hstep
+        rot[k, 0] = np.cos(a)
+        rot[k, 1] = np.sin(a)
+        for g in range(nodes.shape[0]):
+            b = w[k] * nodes[g] * hstep
+            rot[k, 2 + 2 * g] = np.cos(b)
+            rot[k, 3 + 2 * g] = np.sin(b)
+
+
+# Phasors are carried from piece to piece by rotation and evaluated afresh every ANCHOR_EVERY pieces,
+# so their roundings (about 1e-16 per rotation) never add up beyond ~1e-14.
+ANCHOR_EVERY = 64
+
+
+@kernel
+def _piece_sums(
+    ta0: float, anchor: bool, substeps: int, nodes: np.ndarray, vib: np.ndarray, linvib: np.ndarray,
+    ta: np.ndarray, tl: np.ndarray, rot_a: np.ndarray, rot_l: np.ndarray, ph_a: np.ndarray, ph_l: np.ndarray, node_vs: np.ndarray,
+    ends: np.ndarray, end_vs: np.ndarray,
+) -> None:
+    """Vibration sums at the quadrature nodes of each sub-step of a piece starting at ta0 (node_vs, VS_*
+    columns, row ``j n + g``) and at its end (end_vs); at the sub-step boundaries ``ta0 + j hstep``
+    (j = 0 .. substeps), the linear vibration's velocity (ends[j, 0:3]) and displacement
+    ``-sum A/w^2 sin(w t + p)`` (ends[j, 3:6]).
+
+    ``ta``/``tl`` are the sinusoids' sine_terms; ``ph_a``/``ph_l`` hold each sinusoid's phasor ``(cos, sin)`` of its phase at ta0, evaluated
+    directly when ``anchor``; the other times follow by rotating the phasor with the angle-sum
+    identity by the rotations ``rot_*`` of this hstep (_rotations). On return they hold the phasors
+    at the piece's end.
+    """
+    node_vs[:] = 0.0
+    ends[:] = 0.0
+    end_vs[:] = 0.0
+    ng = nodes.shape[0]
+    for k in range(vib.shape[0]):
+        if anchor:
+            ph = vib[k, 3] * ta0 + vib[k, 4]
+            ph_a[k, 0], ph_a[k, 1] = np.cos(ph), np.sin(ph)
+        c, s = ph_a[k, 0], ph_a[k, 1]
+        ch, sh = rot_a[k, 0], rot_a[k, 1]
+        for j in range(substeps):
+            for g in range(ng):
+                rc, rs = rot_a[k, 2 + 2 * g], rot_a[k, 3 + 2 * g]
+                _add_angular(ta, k, c * rc - s * rs, s * rc + c * rs, node_vs[j * ng + g])
+            c, s = c * ch - s * sh, s * ch + c * sh
+        _add_angular(ta, k, c, s, end_vs)
+        ph_a[k, 0], ph_a[k, 1] = c, s
+    for k in range(linvib.shape[0]):
+        if anchor:
+            ph = linvib[k, 3] * ta0 + linvib[k, 4]
+            ph_l[k, 0], ph_l[k, 1] = np.cos(ph), np.sin(ph)
+        c, s = ph_l[k, 0], ph_l[k, 1]
+        ch, sh = rot_l[k, 0], rot_l[k, 1]
+        for j in range(substeps + 1):
+            for i in range(3):
+                ends[j, i] += tl[k, i] * c
+                ends[j, 3 + i] += tl[k, 6 + i] * s
+            if j < substeps:
+                for g in range(ng):
+                    rc, rs = rot_l[k, 2 + 2 * g], rot_l[k, 3 + 2 * g]
+                    _add_linear(tl, k, c * rc - s * rs, s * rc + c * rs, node_vs[j * ng + g])
+                c, s = c * ch - s * sh, s * ch + c * sh
+        _add_linear(tl, k, c, s, end_vs)
+        ph_l[k, 0], ph_l[k, 1] = c, s
 
 
 @kernel
@@ -204,6 +357,8 @@ def integrate(
     t0: float,
     t: np.ndarray,
     substeps: int,
+    nodes: np.ndarray,
+    weights: np.ndarray,
     lat0: float,
     lon0: float,
     h0: float,
@@ -219,21 +374,43 @@ def integrate(
     dtheta: np.ndarray,
     dv: np.ndarray,
     pos: np.ndarray,
+    rows: np.ndarray,
 ) -> None:
-    """Exact IMU increments and the true position at every sample time.
+    """Exact IMU increments, the true position and the truth rows (truth_row) at every sample time.
 
     Position: classical RK4 on ``L' = v_N/(R_N+h)``, ``lon' = v_E/((R_E+h) cos L)``,
-    ``h' = -v_D`` at ``substeps`` per sample. Increments: 5-point Gauss-Legendre
-    quadrature of the IMU rates on each sub-step, with latitude and height at the
-    nodes from a cubic Hermite interpolation of the RK4 solution. Sample
-    intervals are first split at every channel piece boundary in ``breaks``
-    (sorted), so each quadrature spans one smooth piece. With ``use_earth``
-    false, position is the flat NED offset (north m, east m, -h).
+    ``h' = -v_D`` for the channels' smooth velocity at ``substeps`` per sample, plus
+    the linear vibration's displacement over the step in closed form (its integral
+    ``-sum A/w^2 sin(w t + p)``) scaled at the step's start. Increments:
+    Gauss-Legendre quadrature (``nodes``, ``weights`` on [0, 1], gauss_legendre) of
+    the IMU rates on each sub-step, with latitude and height at the nodes from a
+    cubic Hermite interpolation of the step. Sample intervals are first split at
+    every channel piece boundary in ``breaks`` (sorted), so each quadrature spans
+    one smooth piece. With ``use_earth`` false, position is the flat NED offset
+    (north m, east m, -h). The vibration sums come from _piece_sums (one direct
+    phase per sinusoid and piece).
     """
     lat, lon, h = lat0, lon0, h0
     tp = t0
     nb = breaks.shape[0]
     edges = np.empty(nb + 2)
+    ng = nodes.shape[0]
+    node_vs = np.empty((substeps * ng, VS_SIZE))
+    ends = np.empty((substeps + 1, 6))
+    w_a = vib[:, 3].copy()
+    w_l = linvib[:, 3].copy()
+    cache_h = np.full(N_ROT_CACHE, np.nan)
+    cache_a = np.empty((N_ROT_CACHE, vib.shape[0], 2 + 2 * ng))
+    cache_l = np.empty((N_ROT_CACHE, linvib.shape[0], 2 + 2 * ng))
+    next_slot = 0
+    acc_th = np.empty(3)
+    acc_v = np.empty(3)
+    vs_rk = np.zeros(VS_SIZE)
+    terms_a, terms_l = sine_terms(vib, linvib)
+    ph_a = np.empty((vib.shape[0], 2))
+    ph_l = np.empty((linvib.shape[0], 2))
+    end_vs = np.empty(VS_SIZE)
+    pieces = 0
     for i in range(t.shape[0]):
         ti = t[i]
         k0 = np.searchsorted(breaks, tp, side="right")
@@ -246,57 +423,89 @@ def integrate(
             ne += 1
         edges[ne] = ti
         ne += 1
-        acc_th = np.zeros(3)
-        acc_v = np.zeros(3)
+        acc_th[:] = 0.0
+        acc_v[:] = 0.0
         for piece in range(ne - 1):
             ta0 = edges[piece]
             hstep = (edges[piece + 1] - ta0) / substeps
+            slot = -1
+            for c in range(N_ROT_CACHE):
+                if cache_h[c] == hstep:
+                    slot = c
+            if slot < 0:
+                slot = next_slot
+                next_slot = (next_slot + 1) % N_ROT_CACHE
+                _rotations(w_a, hstep, nodes, cache_a[slot])
+                _rotations(w_l, hstep, nodes, cache_l[slot])
+                cache_h[slot] = hstep
+            _piece_sums(ta0, pieces % ANCHOR_EVERY == 0, substeps, nodes, vib, linvib, terms_a, terms_l, cache_a[slot],
+                        cache_l[slot], ph_a, ph_l, node_vs, ends, end_vs)
+            pieces += 1
             for j in range(substeps):
                 ta = ta0 + j * hstep
-                y0 = np.array([lat, lon, h])
-                k1v = _pos_rate(ta, y0, starts, durs, coefs, counts, linvib, use_earth)
-                k2v = _pos_rate(ta + 0.5 * hstep, y0 + 0.5 * hstep * k1v, starts, durs, coefs, counts, linvib, use_earth)
-                k3v = _pos_rate(ta + 0.5 * hstep, y0 + 0.5 * hstep * k2v, starts, durs, coefs, counts, linvib, use_earth)
-                k4v = _pos_rate(ta + hstep, y0 + hstep * k3v, starts, durs, coefs, counts, linvib, use_earth)
-                y1 = y0 + hstep / 6.0 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v)
-                m1 = _pos_rate(ta + hstep, y1, starts, durs, coefs, counts, linvib, use_earth)
-                for g in range(5):
-                    x = GL_NODES[g]
+                hh = 0.5 * hstep
+                # classical RK4 on the smooth velocity, the vibration's displacement added exactly
+                k1 = pos_rate_s(ta, lat, lon, h, starts, durs, coefs, counts, vs_rk, use_earth)
+                k2 = pos_rate_s(ta + hh, lat + hh * k1[0], lon + hh * k1[1], h + hh * k1[2], starts, durs, coefs,
+                                counts, vs_rk, use_earth)
+                k3 = pos_rate_s(ta + hh, lat + hh * k2[0], lon + hh * k2[1], h + hh * k2[2], starts, durs, coefs,
+                                counts, vs_rk, use_earth)
+                k4 = pos_rate_s(ta + hstep, lat + hstep * k3[0], lon + hstep * k3[1], h + hstep * k3[2], starts, durs,
+                                coefs, counts, vs_rk, use_earth)
+                sx, sy, sz = pos_scale_s(lat, h, use_earth)
+                h6 = hstep / 6.0
+                lat1 = lat + h6 * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0]) + sx * (ends[j + 1, 3] - ends[j, 3])
+                lon1 = lon + h6 * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1]) + sy * (ends[j + 1, 4] - ends[j, 4])
+                h1 = h + h6 * (k1[2] + 2.0 * k2[2] + 2.0 * k3[2] + k4[2]) + sz * (ends[j + 1, 5] - ends[j, 5])
+                # Hermite end slopes: the full velocity (smooth + vibration) at both ends
+                s0x, s0z = k1[0] + sx * ends[j, 0], k1[2] + sz * ends[j, 2]
+                vs_rk[VS_VEL:VS_VEL + 3] = ends[j + 1, 0:3]
+                m1 = pos_rate_s(ta + hstep, lat1, lon1, h1, starts, durs, coefs, counts, vs_rk, use_earth)
+                vs_rk[VS_VEL:VS_VEL + 3] = 0.0
+                for g in range(ng):
+                    x = nodes[g]
                     h00 = 2 * x**3 - 3 * x**2 + 1
                     h10 = x**3 - 2 * x**2 + x
                     h01 = -2 * x**3 + 3 * x**2
                     h11 = x**3 - x**2
-                    yn = h00 * y0 + h10 * hstep * k1v + h01 * y1 + h11 * hstep * m1
-                    w_s, f_s = imu_rates(ta + x * hstep, yn[0], yn[2], starts, durs, coefs, counts, vib, consts,
-                                         linvib, use_earth)
-                    acc_th += GL_WEIGHTS[g] * hstep * w_s
-                    acc_v += GL_WEIGHTS[g] * hstep * f_s
-                lat, lon, h = y1[0], y1[1], y1[2]
+                    latn = h00 * lat + h10 * hstep * s0x + h01 * lat1 + h11 * hstep * m1[0]
+                    hn = h00 * h + h10 * hstep * s0z + h01 * h1 + h11 * hstep * m1[2]
+                    r = rates_s(ta + x * hstep, latn, hn, starts, durs, coefs, counts, node_vs[j * ng + g], consts,
+                                use_earth)
+                    wq = weights[g] * hstep
+                    acc_th[0] += wq * r[0]
+                    acc_th[1] += wq * r[1]
+                    acc_th[2] += wq * r[2]
+                    acc_v[0] += wq * r[3]
+                    acc_v[1] += wq * r[4]
+                    acc_v[2] += wq * r[5]
+                lat, lon, h = lat1, lon1, h1
         dtheta[i] = acc_th
         dv[i] = acc_v
         pos[i, 0] = lat
         pos[i, 1] = lon
         pos[i, 2] = h
+        truth_row(ti, starts, durs, coefs, counts, end_vs, consts, rows[i])
         tp = ti
 
 
 @kernel
-def _pos_rate(
-    t: float, y: np.ndarray, starts: np.ndarray, durs: np.ndarray, coefs: np.ndarray, counts: np.ndarray,
-    linvib: np.ndarray, use_earth: bool,
-) -> np.ndarray:
-    _, _, v, _ = vehicle_state(t, starts, durs, coefs, counts, linvib)
-    out = np.empty(3)
+def pos_scale_s(lat: float, h: float, use_earth: bool) -> tuple[float, float, float]:
+    """``d(lat, lon, h)/d(north, east, down)``: ``1/(R_N+h)``, ``1/((R_E+h) cos L)``, -1 (flat: 1, 1, -1)."""
     if use_earth:
-        r_n, r_e = earth.radii(y[0])
-        out[0] = v[0] / (r_n + y[2])
-        out[1] = v[1] / ((r_e + y[2]) * np.cos(y[0]))
-        out[2] = -v[2]
-    else:
-        out[0] = v[0]
-        out[1] = v[1]
-        out[2] = -v[2]
-    return out
+        r_n, r_e = earth.radii(lat)
+        return 1.0 / (r_n + h), 1.0 / ((r_e + h) * np.cos(lat)), -1.0
+    return 1.0, 1.0, -1.0
+
+
+@kernel
+def pos_rate_s(t: float, lat: float, lon: float, h: float, starts: np.ndarray, durs: np.ndarray, coefs: np.ndarray,
+               counts: np.ndarray, vs: np.ndarray, use_earth: bool) -> tuple[float, float, float]:
+    """Rate of (lat, lon, h) (or flat north, east, up) at t: ``L' = v_N/(R_N+h)``,
+    ``lon' = v_E/((R_E+h) cos L)``, ``h' = -v_D`` (linear vibration from ``vs``)."""
+    v = vehicle_s(t, starts, durs, coefs, counts, vs)
+    sx, sy, sz = pos_scale_s(lat, h, use_earth)
+    return v[6] * sx, v[7] * sy, v[8] * sz
 
 
 @kernel
@@ -311,21 +520,35 @@ def truth(
     linvib: np.ndarray,
     out: np.ndarray,
 ) -> None:
-    """True velocity and attitudes at each t: rows ``vn, ve, vd, q_ns[4], q_nv[4], a1, a2``.
+    """truth_row at each t (the vibration sums evaluated directly)."""
+    vs = np.empty(VS_SIZE)
+    for i in range(t.shape[0]):
+        vib_sums(t[i], vib, linvib, vs)
+        truth_row(t[i], starts, durs, coefs, counts, vs, consts, out[i])
+
+
+@kernel
+def truth_row(t: float, starts: np.ndarray, durs: np.ndarray, coefs: np.ndarray, counts: np.ndarray, vs: np.ndarray,
+              consts: np.ndarray, out: np.ndarray) -> None:
+    """True velocity and attitudes at t: ``vn, ve, vd, q_ns[4], q_nv[4], a1, a2`` (vibration sums ``vs``).
 
     ``q_ns`` is the IMU's attitude (what the strapdown solution estimates),
     ``q_nv`` the vehicle's (angular vibration and coning included), a1/a2 the
     turntable angles (rad).
     """
-    for i in range(t.shape[0]):
-        e, _, v, _ = vehicle_state(t[i], starts, durs, coefs, counts, linvib)
-        c_pv, _ = perturbation(t[i], vib, consts)
-        c_sp, _, a1, a2 = turntable(t[i], starts, durs, coefs, counts)
-        c_nv = mat_mul(euler_to_dcm(e[0], e[1], e[2]), c_pv)
-        q_nv = dcm_to_quat(c_nv)
-        q_ns = dcm_to_quat(mat_mul(c_nv, c_sp))
-        out[i, 0:3] = v
-        out[i, 3:7] = q_ns
-        out[i, 7:11] = q_nv
-        out[i, 11] = a1
-        out[i, 12] = a2
+    r, p, y, _, _, _, vn, ve, vd, _, _, _ = vehicle_s(t, starts, durs, coefs, counts, vs)
+    c_pv, _, _, _ = perturbation_s(t, vs, consts)
+    c_sp, _, _, _, a1, a2 = turntable_s(t, starts, durs, coefs, counts)
+    c_nv = mat3_mul_s(euler_to_dcm_s(r, p, y), c_pv)
+    out[0], out[1], out[2] = vn, ve, vd
+    out[3], out[4], out[5], out[6] = dcm_to_quat_s(mat3_mul_s(c_nv, c_sp))
+    out[7], out[8], out[9], out[10] = dcm_to_quat_s(c_nv)
+    out[11] = a1
+    out[12] = a2
+
+
+@kernel
+def euler_rows(q: np.ndarray, out: np.ndarray) -> None:
+    """Roll, pitch, yaw (rad) of each quaternion row (rotation.quat_to_euler)."""
+    for i in range(q.shape[0]):
+        out[i] = quat_to_euler(q[i])

@@ -18,7 +18,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mavins.core import earth
-from mavins.core.rotation import quat_to_euler
 from mavins.progress import Progress
 
 from . import kinematics as kin
@@ -442,24 +441,25 @@ def simulate(
     k = np.arange(1, n + 1)
     t = spec.t0 + (np.round(k * (1e6 / rate)) / 1e6 if usec_grid else k / rate)
     if substeps is None:
-        substeps = max(1, math.ceil(2 * math.pi * spec.max_freq * dt / 0.5), math.ceil(dt / 0.01))
+        substeps = max(1, math.ceil(dt / 0.01))
+    nodes, weights = kin.gauss_legendre(kin.quadrature_order(2 * math.pi * spec.max_freq * dt / substeps))
     dtheta = np.empty((n, 3))
     dv = np.empty((n, 3))
     pos = np.empty((n, 3))
+    rows = np.empty((n + 1, 13))
     p0 = (spec.lat, spec.lon) if spec.use_earth else (0.0, 0.0)
     chunk = 20000
     with Progress("simulate", n) as bar:
         t_prev, p_prev = spec.t0, (p0[0], p0[1], spec.h)
         for a in range(0, n, chunk):
             b = min(a + chunk, n)
-            kin.integrate(t_prev, t[a:b], substeps, p_prev[0], p_prev[1], p_prev[2], spec.starts, spec.durs,
+            kin.integrate(t_prev, t[a:b], substeps, nodes, weights, p_prev[0], p_prev[1], p_prev[2], spec.starts, spec.durs,
                           spec.coefs, spec.counts, spec.vib, spec.consts, spec.linvib, spec.use_earth,
-                          spec.breaks, dtheta[a:b], dv[a:b], pos[a:b])
+                          spec.breaks, dtheta[a:b], dv[a:b], pos[a:b], rows[a + 1:b + 1])
             t_prev, p_prev = t[b - 1], (pos[b - 1, 0], pos[b - 1, 1], pos[b - 1, 2])
             bar.update(b)
     tt = np.concatenate(([spec.t0], t))
-    rows = np.empty((n + 1, 13))
-    kin.truth(tt, spec.starts, spec.durs, spec.coefs, spec.counts, spec.vib, spec.consts, spec.linvib, rows)
+    kin.truth(tt[:1], spec.starts, spec.durs, spec.coefs, spec.counts, spec.vib, spec.consts, spec.linvib, rows[:1])
     pos = np.vstack(([p0[0], p0[1], spec.h], pos))
     if spec.use_earth:
         lat, lon = pos[:, 0], pos[:, 1]
@@ -477,8 +477,11 @@ def simulate(
     truth[:, 4:7] = rows[:, 0:3]
     q = rows[:, 3:7]
     truth[:, 10:14] = q
-    truth[:, 7:10] = np.degrees(np.array([quat_to_euler(qi) for qi in q]))
-    truth[:, 14:17] = np.degrees(np.array([quat_to_euler(qi) for qi in rows[:, 7:11]]))
+    euler = np.empty((n + 1, 3))
+    kin.euler_rows(np.ascontiguousarray(q), euler)
+    truth[:, 7:10] = np.degrees(euler)
+    kin.euler_rows(np.ascontiguousarray(rows[:, 7:11]), euler)
+    truth[:, 14:17] = np.degrees(euler)
     truth[:, 17] = np.degrees(rows[:, 11])
     truth[:, 18] = np.degrees(rows[:, 12])
     return SimResult(spec.t0, t, dtheta, dv, truth, spec)

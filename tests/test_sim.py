@@ -29,6 +29,7 @@ import json
 import math
 import subprocess
 import sys
+from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
@@ -272,6 +273,65 @@ def test_linear_vibration_closed_form(yaw) -> None:
     assert np.max(np.abs(res.dtheta)) == 0.0
     p = np.outer(math.sin(phase) - np.sin(w * tp + phase), acc) / w**2
     assert np.max(np.abs(lab_ned(res.truth) - p)) < POS_FLOOR
+
+
+@pytest.mark.parametrize("wh, nodes", [(0.5, 5), (1.0, 6), (2 * math.pi * 90.0 / 250.0, 8), (4.0, 9)])
+def test_quadrature_order_is_the_fewest_nodes_within_the_remainder_bound(wh, nodes) -> None:
+    """[AS64] 25.4.30 on [0, h]: remainder (n!)^4 / ((2n+1)((2n)!)^3) (W h)^(2n) relative to A h.
+
+    Worked by hand: W h = 0.5 -> 3.9e-13 * 0.5^10 = 3.8e-16 <= 1e-15 at n = 5 (the floor); the flight's
+    90 Hz at 250 Hz (W h = 2.26): n = 7 gives 6.5e-20 * 2.26^14 = 5.9e-15, n = 8 gives 8e-18; W h = 1:
+    n = 5 gives 3.9e-13, n = 6 gives 1.9e-16; W h = 4: n = 8 gives 7e-14, n = 9 gives 2.4e-16.
+    And the rule with that many nodes integrates A sin(W t + p) to 1e-15 A h.
+    """
+    assert kin.quadrature_order(wh) == nodes
+    x, w = kin.gauss_legendre(nodes)
+    assert np.all(np.diff(x) > 0) and x[0] > 0 and x[-1] < 1 and math.isclose(w.sum(), 1.0, rel_tol=1e-15)
+    h, p = 1e-3, 0.3
+    big_w = wh / h
+    exact = (math.cos(p) - math.cos(big_w * h + p)) / big_w
+    assert abs(h * np.sum(w * np.sin(big_w * h * x + p)) - exact) < 1e-15 * h * 4  # four roundings of the sum
+    with pytest.raises(ValueError, match="raise substeps"):
+        kin.quadrature_order(100.0)
+    # the bound in exact rational arithmetic, against the kernel's logarithms
+    for wh_k in (0.1, 0.7, 1.5, 3.0, 10.0, 30.0, 60.0):
+        bound = [n for n in range(5, 41)
+                 if Fraction(math.factorial(n) ** 4, (2 * n + 1) * math.factorial(2 * n) ** 3)
+                 * Fraction(wh_k) ** (2 * n) <= Fraction(1, 10**15)]
+        assert kin.quadrature_order(wh_k) == bound[0]
+
+
+def test_high_frequency_linear_vibration_closed_form() -> None:
+    """Linear lines up to 90 Hz at 250 Hz (the flight's regime: 8-node quadrature, phasors carried over
+    more than ANCHOR_EVERY pieces): dv and the position are the sums of the lines' closed forms."""
+    rate, f_hz = 250.0, (61.0, 77.5, 90.0)
+    tr = lab(yaw=20.0).static(3.0)
+    lines = [(np.array([0.3, -0.2, 0.5]) * (k + 1) / 3, f, 0.4 + k) for k, f in enumerate(f_hz)]
+    for acc, f, ph in lines:
+        tr = tr.add_linear_vibration(tuple(acc), f, ph)
+    res = simulate(tr, rate)
+    assert len(res.t) > 10 * kin.ANCHOR_EVERY
+    tp = tt_all(res)
+    v = sum(-np.outer(np.cos(2 * math.pi * f * tp + ph), acc) / (2 * math.pi * f) for acc, f, ph in lines)
+    p = sum(np.outer(math.sin(ph) - np.sin(2 * math.pi * f * tp + ph), acc) / (2 * math.pi * f) ** 2
+            for acc, f, ph in lines)
+    cz, sz = math.cos(math.radians(20.0)), math.sin(math.radians(20.0))
+    c_bn = np.array([[cz, sz, 0.0], [-sz, cz, 0.0], [0.0, 0.0, 1.0]])
+    dv = np.diff(v, axis=0) @ c_bn.T - np.outer(np.diff(tp), [0.0, 0.0, G_LAB])
+    assert np.max(np.abs(res.dv - dv)) < 1e-15 * 20
+    assert np.max(np.abs(res.truth[:, 4:7] - v)) < 1e-15
+    assert np.max(np.abs(lab_ned(res.truth) - p)) < POS_FLOOR
+
+
+def test_high_frequency_angular_vibration_closed_form() -> None:
+    """A single-axis angular line at 90 Hz sampled at 250 Hz: dtheta = A [sin(W t + p)] over every
+    interval (the phasor recurrence across 750 samples keeps it to rounding)."""
+    amp_deg, f_hz, phase, rate = 0.05, 90.0, 1.1, 250.0
+    u = np.array([1.0, -2.0, 2.0]) / 3.0
+    res = simulate(lab(yaw=0.0).static(3.0).add_angular_vibration(tuple(u), amp_deg, f_hz, phase), rate)
+    tp = tt_all(res)
+    dth = np.outer(np.diff(math.radians(amp_deg) * np.sin(2 * math.pi * f_hz * tp + phase)), u)
+    assert np.max(np.abs(res.dtheta - dth)) < 1e-16 * 20
 
 
 def test_sculling_closed_form() -> None:

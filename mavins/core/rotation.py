@@ -379,6 +379,12 @@ def mat3_mul_s(a: Mat9, b: Mat9) -> Mat9:
 
 
 @kernel
+def mat3t_vec_s(a: Mat9, x: float, y: float, z: float) -> tuple[float, float, float]:
+    """``A^T v`` for a 3x3 matrix held as a row-major 9-tuple."""
+    return (a[0] * x + a[3] * y + a[6] * z, a[1] * x + a[4] * y + a[7] * z, a[2] * x + a[5] * y + a[8] * z)
+
+
+@kernel
 def dcm_to_rotvec(c: np.ndarray) -> np.ndarray:
     """Rotation vector of a rotation matrix (through the quaternion)."""
     return quat_to_rotvec(dcm_to_quat(c))
