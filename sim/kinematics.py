@@ -24,7 +24,7 @@ import math
 import numpy as np
 
 from mavins.core import earth
-from mavins.core.jit import kernel
+from mavins.core.jit import kernel, sum_kernel
 from mavins.core.rotation import (Mat9, dcm_to_quat_s, euler_to_dcm_s, mat3_mul_s, mat3t_vec_s, quat_mul_s,
                                    quat_to_dcm_s, quat_to_euler, rotvec_to_dcm_s)
 
@@ -96,56 +96,70 @@ VS_SIZE = 12
 
 @kernel
 def sine_terms(vib: np.ndarray, linvib: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Coefficients of each sinusoid's cosine and sine in the vibration sums.
+    """Coefficients of each sinusoid's sine and cosine in the vibration sums, one column per sinusoid.
 
     Rows of ``vib``/``linvib``: amplitude x, y, z, angular frequency w (rad/s), phase p (rad).
-    Angular (rows of the first result): ``phi = sum A sin(w t + p)`` [A], ``phi' = sum A w cos(w t + p)``
-    [A w]; linear (second): ``v = -sum A/w cos(w t + p)`` [-A/w], ``a = sum A sin(w t + p)`` [A],
-    displacement ``-sum A/w^2 sin(w t + p)`` [-A/w^2] (v and displacement: the integrals of a).
+    Angular (first result): rows 0-2 ``A`` (``phi = sum A sin(w t + p)``), rows 3-5 ``A w``
+    (``phi' = sum A w cos(w t + p)``). Linear (second): rows 0-2 ``-A/w^2`` (displacement
+    ``-sum A/w^2 sin(w t + p)``), rows 3-5 ``-A/w`` (velocity ``-sum A/w cos(w t + p)``), rows 6-8
+    ``A`` (acceleration ``sum A sin(w t + p)``): velocity and displacement are the integrals of a.
     """
-    ta = np.empty((vib.shape[0], 6))
+    ta = np.empty((6, vib.shape[0]))
     for k in range(vib.shape[0]):
         for i in range(3):
-            ta[k, i] = vib[k, i]
-            ta[k, 3 + i] = vib[k, i] * vib[k, 3]
-    tl = np.empty((linvib.shape[0], 9))
+            ta[i, k] = vib[k, i]
+            ta[3 + i, k] = vib[k, i] * vib[k, 3]
+    tl = np.empty((9, linvib.shape[0]))
     for k in range(linvib.shape[0]):
         w = linvib[k, 3]
         for i in range(3):
-            tl[k, i] = -linvib[k, i] / w
-            tl[k, 3 + i] = linvib[k, i]
-            tl[k, 6 + i] = -linvib[k, i] / (w * w)
+            tl[i, k] = -linvib[k, i] / (w * w)
+            tl[3 + i, k] = -linvib[k, i] / w
+            tl[6 + i, k] = linvib[k, i]
     return ta, tl
+
+
+# Rows of sine_terms per family, and the VS_* slots they fill: (sine rows, cosine rows, sine slot, cosine slot).
+ANGULAR_ROWS = (0, 3, VS_PHI, VS_PHID)
+LINEAR_ROWS = (6, 3, VS_ACC, VS_VEL)
+DISPLACEMENT_ROWS = (0, 3, 3, 0)  # into ends[j]: velocity at 0:3, displacement at 3:6
+
+
+@sum_kernel
+def _sine_sum(terms: np.ndarray, rows: tuple[int, int, int, int], c: np.ndarray, s: np.ndarray, rc: np.ndarray,
+              rs: np.ndarray, out: np.ndarray, at: int) -> None:
+    """``out[at, sin_slot + i] += sum_k terms[sin_row + i, k] sin_k``, ``out[at, cos_slot + i] +=
+    sum_k terms[cos_row + i, k] cos_k`` (i = 0..2), where ``(cos_k, sin_k)`` is the phasor ``(c, s)[k]``
+    turned by ``(rc, rs)[k]`` (angle sum: ``cos(a + b) = c rc - s rs``, ``sin(a + b) = s rc + c rs``)."""
+    sin_row, cos_row, sin_slot, cos_slot = rows
+    a0 = a1 = a2 = b0 = b1 = b2 = 0.0
+    for k in range(c.shape[0]):
+        ck = c[k] * rc[k] - s[k] * rs[k]
+        sk = s[k] * rc[k] + c[k] * rs[k]
+        a0 += terms[sin_row, k] * sk
+        a1 += terms[sin_row + 1, k] * sk
+        a2 += terms[sin_row + 2, k] * sk
+        b0 += terms[cos_row, k] * ck
+        b1 += terms[cos_row + 1, k] * ck
+        b2 += terms[cos_row + 2, k] * ck
+    out[at, sin_slot] += a0
+    out[at, sin_slot + 1] += a1
+    out[at, sin_slot + 2] += a2
+    out[at, cos_slot] += b0
+    out[at, cos_slot + 1] += b1
+    out[at, cos_slot + 2] += b2
 
 
 @kernel
 def vib_sums(t: float, vib: np.ndarray, linvib: np.ndarray, out: np.ndarray) -> None:
     """The vibration sums at t into ``out`` (VS_* slots, sine_terms), each phase evaluated directly."""
     ta, tl = sine_terms(vib, linvib)
-    out[:] = 0.0
-    for k in range(vib.shape[0]):
-        ph = vib[k, 3] * t + vib[k, 4]
-        _add_angular(ta, k, np.cos(ph), np.sin(ph), out)
-    for k in range(linvib.shape[0]):
-        ph = linvib[k, 3] * t + linvib[k, 4]
-        _add_linear(tl, k, np.cos(ph), np.sin(ph), out)
-
-
-@kernel
-def _add_angular(ta: np.ndarray, k: int, c: float, s: float, out: np.ndarray) -> None:
-    """Add angular sinusoid k (sine_terms row), given the cosine and sine of its phase, to phi and phi'."""
-    for i in range(3):
-        out[VS_PHI + i] += ta[k, i] * s
-        out[VS_PHID + i] += ta[k, 3 + i] * c
-
-
-@kernel
-def _add_linear(tl: np.ndarray, k: int, c: float, s: float, out: np.ndarray) -> None:
-    """Add linear sinusoid k (sine_terms row), given the cosine and sine of its phase, to velocity and
-    acceleration."""
-    for i in range(3):
-        out[VS_VEL + i] += tl[k, i] * c
-        out[VS_ACC + i] += tl[k, 3 + i] * s
+    block = out.reshape((1, VS_SIZE))
+    block[:] = 0.0
+    for fam, terms, rows in ((vib, ta, ANGULAR_ROWS), (linvib, tl, LINEAR_ROWS)):
+        ph = fam[:, 3] * t + fam[:, 4]
+        n = fam.shape[0]
+        _sine_sum(terms, rows, np.cos(ph), np.sin(ph), np.ones(n), np.zeros(n), block, 0)
 
 
 @kernel
@@ -282,17 +296,17 @@ def quadrature_order(wh: float, tol: float = QUADRATURE_TOL) -> int:
 
 
 @kernel
-def _rotations(w: np.ndarray, hstep: float, nodes: np.ndarray, rot: np.ndarray) -> None:
-    """cos and sin of ``w hstep`` (rot[:, 0:2]) and of ``w x_g hstep`` at the quadrature nodes x_g
-    (rot[:, 2 + 2 g : 4 + 2 g]) for each angular frequency w (rad/s)."""
+def _rotations(w: np.ndarray, hstep: float, nodes: np.ndarray, step: np.ndarray, rot: np.ndarray) -> None:
+    """cos and sin of ``w hstep`` (step[0], step[1]) and of ``w x_g hstep`` at the quadrature nodes
+    x_g (rot[0, g], rot[1, g]), for each angular frequency w (rad/s, one column each)."""
     for k in range(w.shape[0]):
         a = w[k] * hstep
-        rot[k, 0] = np.cos(a)
-        rot[k, 1] = np.sin(a)
+        step[0, k] = np.cos(a)
+        step[1, k] = np.sin(a)
         for g in range(nodes.shape[0]):
             b = w[k] * nodes[g] * hstep
-            rot[k, 2 + 2 * g] = np.cos(b)
-            rot[k, 3 + 2 * g] = np.sin(b)
+            rot[0, g, k] = np.cos(b)
+            rot[1, g, k] = np.sin(b)
 
 
 # Phasors are carried from piece to piece by rotation and evaluated afresh every ANCHOR_EVERY pieces,
@@ -302,54 +316,38 @@ ANCHOR_EVERY = 64
 
 @kernel
 def _piece_sums(
-    ta0: float, anchor: bool, substeps: int, nodes: np.ndarray, vib: np.ndarray, linvib: np.ndarray,
-    ta: np.ndarray, tl: np.ndarray, rot_a: np.ndarray, rot_l: np.ndarray, ph_a: np.ndarray, ph_l: np.ndarray, node_vs: np.ndarray,
-    ends: np.ndarray, end_vs: np.ndarray,
+    ta0: float, anchor: bool, substeps: int, fam: np.ndarray, terms: np.ndarray, rows: tuple[int, int, int, int],
+    step: np.ndarray, rot: np.ndarray, carry: np.ndarray, pc: np.ndarray, ps: np.ndarray, node_vs: np.ndarray,
+    end_vs: np.ndarray,
 ) -> None:
-    """Vibration sums at the quadrature nodes of each sub-step of a piece starting at ta0 (node_vs, VS_*
-    columns, row ``j n + g``) and at its end (end_vs); at the sub-step boundaries ``ta0 + j hstep``
-    (j = 0 .. substeps), the linear vibration's velocity (ends[j, 0:3]) and displacement
-    ``-sum A/w^2 sin(w t + p)`` (ends[j, 3:6]).
+    """Add one family of sinusoids (``fam``: rows of amplitude x, y, z, w, phase) to the vibration sums
+    of a piece starting at ta0: at the quadrature nodes of each sub-step (node_vs[j n + g, VS_*]) and at
+    the piece's end (end_vs[0]). ``pc``/``ps`` receive each sinusoid's phasor ``(cos, sin)`` of its phase
+    at the sub-step boundaries ``ta0 + j hstep`` (row j = 0 .. substeps).
 
-    ``ta``/``tl`` are the sinusoids' sine_terms; ``ph_a``/``ph_l`` hold each sinusoid's phasor ``(cos, sin)`` of its phase at ta0, evaluated
-    directly when ``anchor``; the other times follow by rotating the phasor with the angle-sum
-    identity by the rotations ``rot_*`` of this hstep (_rotations). On return they hold the phasors
-    at the piece's end.
+    ``carry`` holds the phasors at ta0, evaluated directly when ``anchor``; the others follow by turning
+    them with the angle-sum identity by this hstep's rotations (_rotations: ``step``, ``rot``). On
+    return ``carry`` holds the phasors at the piece's end. ``terms``/``rows``: sine_terms and
+    ANGULAR_ROWS or LINEAR_ROWS.
     """
-    node_vs[:] = 0.0
-    ends[:] = 0.0
-    end_vs[:] = 0.0
-    ng = nodes.shape[0]
-    for k in range(vib.shape[0]):
-        if anchor:
-            ph = vib[k, 3] * ta0 + vib[k, 4]
-            ph_a[k, 0], ph_a[k, 1] = np.cos(ph), np.sin(ph)
-        c, s = ph_a[k, 0], ph_a[k, 1]
-        ch, sh = rot_a[k, 0], rot_a[k, 1]
-        for j in range(substeps):
-            for g in range(ng):
-                rc, rs = rot_a[k, 2 + 2 * g], rot_a[k, 3 + 2 * g]
-                _add_angular(ta, k, c * rc - s * rs, s * rc + c * rs, node_vs[j * ng + g])
-            c, s = c * ch - s * sh, s * ch + c * sh
-        _add_angular(ta, k, c, s, end_vs)
-        ph_a[k, 0], ph_a[k, 1] = c, s
-    for k in range(linvib.shape[0]):
-        if anchor:
-            ph = linvib[k, 3] * ta0 + linvib[k, 4]
-            ph_l[k, 0], ph_l[k, 1] = np.cos(ph), np.sin(ph)
-        c, s = ph_l[k, 0], ph_l[k, 1]
-        ch, sh = rot_l[k, 0], rot_l[k, 1]
-        for j in range(substeps + 1):
-            for i in range(3):
-                ends[j, i] += tl[k, i] * c
-                ends[j, 3 + i] += tl[k, 6 + i] * s
-            if j < substeps:
-                for g in range(ng):
-                    rc, rs = rot_l[k, 2 + 2 * g], rot_l[k, 3 + 2 * g]
-                    _add_linear(tl, k, c * rc - s * rs, s * rc + c * rs, node_vs[j * ng + g])
-                c, s = c * ch - s * sh, s * ch + c * sh
-        _add_linear(tl, k, c, s, end_vs)
-        ph_l[k, 0], ph_l[k, 1] = c, s
+    n = fam.shape[0]
+    ng = rot.shape[1]
+    if anchor:
+        for k in range(n):
+            a = fam[k, 3] * ta0 + fam[k, 4]
+            carry[0, k] = np.cos(a)
+            carry[1, k] = np.sin(a)
+    pc[0] = carry[0]
+    ps[0] = carry[1]
+    for j in range(substeps):
+        for k in range(n):
+            pc[j + 1, k] = pc[j, k] * step[0, k] - ps[j, k] * step[1, k]
+            ps[j + 1, k] = ps[j, k] * step[0, k] + pc[j, k] * step[1, k]
+        for g in range(ng):
+            _sine_sum(terms, rows, pc[j], ps[j], rot[0, g], rot[1, g], node_vs, j * ng + g)
+    _sine_sum(terms, rows, pc[substeps], ps[substeps], step[2], step[3], end_vs, 0)
+    carry[0] = pc[substeps]
+    carry[1] = ps[substeps]
 
 
 @kernel
@@ -397,19 +395,21 @@ def integrate(
     ng = nodes.shape[0]
     node_vs = np.empty((substeps * ng, VS_SIZE))
     ends = np.empty((substeps + 1, 6))
-    w_a = vib[:, 3].copy()
-    w_l = linvib[:, 3].copy()
+    end_vs = np.empty((1, VS_SIZE))
+    na, nl = vib.shape[0], linvib.shape[0]
+    terms_a, terms_l = sine_terms(vib, linvib)
     cache_h = np.full(N_ROT_CACHE, np.nan)
-    cache_a = np.empty((N_ROT_CACHE, vib.shape[0], 2 + 2 * ng))
-    cache_l = np.empty((N_ROT_CACHE, linvib.shape[0], 2 + 2 * ng))
+    # rows 0, 1: cos and sin of w hstep; rows 2, 3: 1 and 0 (no turn: the phasor itself)
+    step_a, step_l = np.empty((N_ROT_CACHE, 4, na)), np.empty((N_ROT_CACHE, 4, nl))
+    step_a[:, 2], step_a[:, 3], step_l[:, 2], step_l[:, 3] = 1.0, 0.0, 1.0, 0.0
+    rot_a, rot_l = np.empty((N_ROT_CACHE, 2, ng, na)), np.empty((N_ROT_CACHE, 2, ng, nl))
+    pc_a, ps_a = np.empty((substeps + 1, na)), np.empty((substeps + 1, na))
+    pc_l, ps_l = np.empty((substeps + 1, nl)), np.empty((substeps + 1, nl))
+    carry_a, carry_l = np.empty((2, na)), np.empty((2, nl))
     next_slot = 0
     acc_th = np.empty(3)
     acc_v = np.empty(3)
     vs_rk = np.zeros(VS_SIZE)
-    terms_a, terms_l = sine_terms(vib, linvib)
-    ph_a = np.empty((vib.shape[0], 2))
-    ph_l = np.empty((linvib.shape[0], 2))
-    end_vs = np.empty(VS_SIZE)
     pieces = 0
     for i in range(t.shape[0]):
         ti = t[i]
@@ -435,11 +435,19 @@ def integrate(
             if slot < 0:
                 slot = next_slot
                 next_slot = (next_slot + 1) % N_ROT_CACHE
-                _rotations(w_a, hstep, nodes, cache_a[slot])
-                _rotations(w_l, hstep, nodes, cache_l[slot])
+                _rotations(vib[:, 3], hstep, nodes, step_a[slot], rot_a[slot])
+                _rotations(linvib[:, 3], hstep, nodes, step_l[slot], rot_l[slot])
                 cache_h[slot] = hstep
-            _piece_sums(ta0, pieces % ANCHOR_EVERY == 0, substeps, nodes, vib, linvib, terms_a, terms_l, cache_a[slot],
-                        cache_l[slot], ph_a, ph_l, node_vs, ends, end_vs)
+            node_vs[:] = 0.0
+            end_vs[:] = 0.0
+            ends[:] = 0.0
+            anchor = pieces % ANCHOR_EVERY == 0
+            _piece_sums(ta0, anchor, substeps, vib, terms_a, ANGULAR_ROWS, step_a[slot], rot_a[slot], carry_a,
+                        pc_a, ps_a, node_vs, end_vs)
+            _piece_sums(ta0, anchor, substeps, linvib, terms_l, LINEAR_ROWS, step_l[slot], rot_l[slot], carry_l,
+                        pc_l, ps_l, node_vs, end_vs)
+            for j in range(substeps + 1):  # the linear vibration's velocity and displacement at the boundaries
+                _sine_sum(terms_l, DISPLACEMENT_ROWS, pc_l[j], ps_l[j], step_l[slot, 2], step_l[slot, 3], ends, j)
             pieces += 1
             for j in range(substeps):
                 ta = ta0 + j * hstep
@@ -485,7 +493,7 @@ def integrate(
         pos[i, 0] = lat
         pos[i, 1] = lon
         pos[i, 2] = h
-        truth_row(ti, starts, durs, coefs, counts, end_vs, consts, rows[i])
+        truth_row(ti, starts, durs, coefs, counts, end_vs[0], consts, rows[i])
         tp = ti
 
 

@@ -52,6 +52,16 @@ def kernel(func: F) -> F:
     return dispatcher
 
 
+def sum_kernel(func: F) -> F:
+    """:func:`kernel` whose floating-point sums may be reassociated (numba ``fastmath`` reassoc and
+    contract), so that a long sum vectorises. Only for sums whose order of terms means nothing beyond
+    rounding (a sum of many sinusoids); never for the navigation's recursions."""
+    dispatcher = numba.njit(cache=True, nogil=True, error_model="numpy", fastmath={"reassoc", "contract"})(func)
+    if dispatcher is not func:
+        aot.attach(dispatcher)
+    return dispatcher
+
+
 class _FrameBound:
     """A kernel whose last argument is the mechanisation frame, called from Python with that
     argument a compile-time constant (see :func:`for_frame`)."""
