@@ -534,7 +534,7 @@ def _cmd_sim(args: argparse.Namespace) -> int:
         print(f"mavins sim: error: {_scenario_error(args.scenario, exc)}", file=sys.stderr)
         return EXIT_USAGE
     speed = None if args.speed == "max" else float(args.speed)
-    from sim.generate import FILE_NAMES, check_size, extra_names, generate, write
+    from sim.generate import FILE_NAMES, check_size, extra_names, generate, generate_chunks, write
 
     try:
         if args.output is not None:
@@ -543,8 +543,13 @@ def _cmd_sim(args: argparse.Namespace) -> int:
             files.check_outputs({f"-o {args.output}/{n}": args.output / n for n in FILE_NAMES + extra_names(args.imus)},
                                 {"SCENARIO": Path(scenario.source)})
         check_size(scenario, duration=args.duration, rate=args.rate, outdir=args.output)
-        run = generate(scenario, duration=args.duration, rate=args.rate, seed=args.seed, grade=args.grade,
-                       usec_grid=args.stream is not None, imus=args.imus)
+        if args.stream is not None:  # made in pieces while it streams: the first message leaves at once
+            pieces = generate_chunks(scenario, duration=args.duration, rate=args.rate, seed=args.seed,
+                                     grade=args.grade, usec_grid=True, imus=args.imus)
+            run = next(pieces)
+        else:
+            run = generate(scenario, duration=args.duration, rate=args.rate, seed=args.seed, grade=args.grade,
+                           imus=args.imus)
         if args.output is not None:
             from sim.aiding import BaroConfig, GnssConfig, MagConfig, simulate_aiding
 
@@ -563,14 +568,25 @@ def _cmd_sim(args: argparse.Namespace) -> int:
         print(f"mavins sim: {scenario.name}: {len(run.t)} samples at {run.rate:g} Hz, grade {run.grade}: "
               + ", ".join(str(p) for p in paths), file=sys.stderr)
         return 0
+    import itertools
+
     from sim.aiding import MagConfig
+    from sim.generate import run_duration
     from sim.stream import StreamOptions, stream
 
+    from .progress import Progress
+
     outages = (tuple(args.gnss_outage),) if args.gnss_outage else ()
-    stats = stream(run, args.stream, StreamOptions(msg=args.msg, imu_rates=args.imu_rates, speed=speed, sysid=args.sysid,
-                                                  imus=args.imus, seed=args.seed, gnss_outages=outages,
-                                                  mag_rate=args.mag_rate,
-                                                  mag=_sim_mag(MagConfig, run, args)))
+    try:
+        with Progress("stream", run_duration(scenario, args.duration), "s") as bar:
+            stats = stream(itertools.chain([run], pieces), args.stream,
+                           StreamOptions(msg=args.msg, imu_rates=args.imu_rates, speed=speed, sysid=args.sysid,
+                                         imus=args.imus, seed=args.seed, gnss_outages=outages,
+                                         mag_rate=args.mag_rate, mag=_sim_mag(MagConfig, run, args)),
+                           progress=bar)
+    except (ValueError, OSError) as exc:  # a piece that could not be made, or the link
+        print(f"mavins sim: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
     print(f"mavins sim: streamed {stats.imu_messages} IMU messages to {args.stream}", file=sys.stderr)
     return 0
 

@@ -45,6 +45,8 @@ __all__ = [
     "GM_ADEV_PEAK_RATIO",
     "GM_ADEV_PEAK_TAU_RATIO",
     "GRADES",
+    "BLOCK",
+    "ErrorStream",
     "ImuErrorModel",
     "SensorErrorModel",
     "allan_deviation",
@@ -254,25 +256,38 @@ def _generators(seed: int) -> dict[str, np.random.Generator]:
     return {name: np.random.Generator(np.random.PCG64(child)) for name, child in zip(_STREAMS, children)}
 
 
+# Rows per Gauss-Markov block boundary: the closed form below never spans a multiple of BLOCK rows, so a
+# run corrupted in chunks that start on multiples of BLOCK (ErrorStream) equals the run corrupted at
+# once, bit for bit.
+BLOCK = 4096
+
+
 def _gauss_markov_states(
-    sigma: float, tau: float, dt: NDArray[np.float64], rng: np.random.Generator
+    sigma: float, tau: float, dt: NDArray[np.float64], rng: np.random.Generator,
+    state0: NDArray[np.float64] | None = None, row0: int = 0,
 ) -> NDArray[np.float64]:
-    """Exact discrete Gauss-Markov states at the N+1 interval boundaries, shape (N+1, 3)."""
+    """Exact discrete Gauss-Markov states at the N+1 interval boundaries, shape (N+1, 3).
+
+    ``b_k = phi_k b_{k-1} + w_k``, ``phi = exp(-dt/tau)``, ``q = sigma^2 (1 - phi^2)``. The first
+    state is ``state0`` (drawn from the stationary distribution when None); ``row0`` is the global
+    row of ``dt[0]`` (for the block boundaries).
+    """
     n = dt.size
     states = np.empty((n + 1, 3))
-    states[0] = sigma * rng.standard_normal(3)
+    states[0] = sigma * rng.standard_normal(3) if state0 is None else state0
     efolds = dt / tau
     phi = np.exp(-efolds)
     noise = (sigma * np.sqrt(-np.expm1(-2.0 * efolds)))[:, None] * rng.standard_normal((n, 3))
     # Closed form of b_k = phi_k b_{k-1} + w_k inside a block:
     # b_k = P_k (b_start + sum_j w_j / P_j) with P_k the product of the phis
     # since the block start; blocks end before P drops below exp(-_MAX_EFOLDS)
-    # so that 1/P stays well inside the float range.
+    # so that 1/P stays well inside the float range, and at every multiple of BLOCK rows.
     cum = np.cumsum(efolds)
     start = 0
     while start < n:
         base = cum[start - 1] if start > 0 else 0.0
         stop = max(int(np.searchsorted(cum, base + _MAX_EFOLDS, side="right")), start + 1)
+        stop = min(stop, (row0 + start) // BLOCK * BLOCK + BLOCK - row0)
         if stop == start + 1:
             states[start + 1] = phi[start] * states[start] + noise[start]
         else:
@@ -282,59 +297,131 @@ def _gauss_markov_states(
     return states
 
 
-def _quantize(x: NDArray[np.float64], step: float) -> NDArray[np.float64]:
-    """Residual-carrying quantiser: outputs are multiples of ``step`` and the
-    running sum of the outputs stays within step/2 of the running sum of ``x``."""
-    counts = np.rint(np.cumsum(x, axis=0) / step)
-    return np.diff(counts, axis=0, prepend=0.0) * step
+def _running_sum(x: NDArray[np.float64], last: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``last, last + x_0, last + x_0 + x_1, ...`` (N+1 rows), summed in order so that a sum taken in
+    consecutive chunks equals the sum taken at once."""
+    return np.cumsum(np.concatenate([last[None, :], x]), axis=0)
 
 
-def _corrupt_triad(
-    err: SensorErrorModel,
-    x: NDArray[np.float64],
-    dt: NDArray[np.float64],
-    rngs: dict[str, np.random.Generator],
-    prefix: str,
-    coupling: NDArray[np.float64] | None,
-) -> NDArray[np.float64]:
-    out = x.copy()
-    scale = np.diag(np.asarray(err.scale_factor_ppm) * 1e-6)
-    mis = np.asarray(err.misalignment)
-    if scale.any() or mis.any():
-        out = x @ ((np.eye(3) + scale) @ (np.eye(3) + mis)).T
-    if coupling is not None:
-        out = out + coupling
-    dt_col = dt[:, None]
-    bias = np.asarray(err.bias)
-    if err.turn_on_bias_sigma > 0.0:
-        bias = bias + err.turn_on_bias_sigma * rngs[f"{prefix}_turn_on"].standard_normal(3)
-    if bias.any():
-        out = out + bias * dt_col
-    if err.bias_instability_sigma > 0.0:
-        states = _gauss_markov_states(
-            err.bias_instability_sigma, err.bias_instability_tau, dt, rngs[f"{prefix}_gm"]
-        )
-        out = out + 0.5 * (states[:-1] + states[1:]) * dt_col
-    if err.rate_random_walk > 0.0:
-        steps = err.rate_random_walk * np.sqrt(dt_col) * rngs[f"{prefix}_rrw"].standard_normal((dt.size, 3))
-        states = np.concatenate([np.zeros((1, 3)), np.cumsum(steps, axis=0)])
-        out = out + 0.5 * (states[:-1] + states[1:]) * dt_col
-    if err.random_walk > 0.0:
-        out = out + err.random_walk * np.sqrt(dt_col) * rngs[f"{prefix}_white"].standard_normal((dt.size, 3))
-    if err.quantization > 0.0:
-        out = _quantize(out, err.quantization)
-    return out
+class _Triad:
+    """The error state of one sensor triad between chunks: turn-on bias, Gauss-Markov and rate random
+    walk states, and the quantiser's running sums."""
+
+    def __init__(self, err: SensorErrorModel, rngs: dict[str, np.random.Generator], prefix: str) -> None:
+        self.err = err
+        self.prefix = prefix
+        self.rngs = rngs
+        bias = np.asarray(err.bias, dtype=float)
+        if err.turn_on_bias_sigma > 0.0:
+            bias = bias + err.turn_on_bias_sigma * rngs[f"{prefix}_turn_on"].standard_normal(3)
+        self.bias = bias
+        self.gm: NDArray[np.float64] | None = None  # drawn with the first chunk, from the gm stream
+        self.rrw = np.zeros(3)
+        self.q_sum = np.zeros(3)
+        self.q_count = np.zeros(3)
+
+    def corrupt(self, x: NDArray[np.float64], dt: NDArray[np.float64], row0: int,
+                coupling: NDArray[np.float64] | None) -> NDArray[np.float64]:
+        """The model of the module docstring on rows ``row0 ..`` (increments x, intervals dt)."""
+        err, rngs, prefix = self.err, self.rngs, self.prefix
+        out = x.copy()
+        scale = np.diag(np.asarray(err.scale_factor_ppm) * 1e-6)
+        mis = np.asarray(err.misalignment)
+        if scale.any() or mis.any():
+            out = x @ ((np.eye(3) + scale) @ (np.eye(3) + mis)).T
+        if coupling is not None:
+            out = out + coupling
+        dt_col = dt[:, None]
+        if self.bias.any():
+            out = out + self.bias * dt_col
+        if err.bias_instability_sigma > 0.0:
+            states = _gauss_markov_states(err.bias_instability_sigma, err.bias_instability_tau, dt,
+                                          rngs[f"{prefix}_gm"], self.gm, row0)
+            self.gm = states[-1].copy()
+            out = out + 0.5 * (states[:-1] + states[1:]) * dt_col
+        if err.rate_random_walk > 0.0:
+            steps = err.rate_random_walk * np.sqrt(dt_col) * rngs[f"{prefix}_rrw"].standard_normal((dt.size, 3))
+            states = _running_sum(steps, self.rrw)
+            self.rrw = states[-1].copy()
+            out = out + 0.5 * (states[:-1] + states[1:]) * dt_col
+        if err.random_walk > 0.0:
+            out = out + err.random_walk * np.sqrt(dt_col) * rngs[f"{prefix}_white"].standard_normal((dt.size, 3))
+        if err.quantization > 0.0:
+            out, self.q_sum, self.q_count = _quantize(out, err.quantization, self.q_sum, self.q_count)
+        return out
 
 
-def _jitter(
-    t: NDArray[np.float64], dt: NDArray[np.float64], sigma: float, rng: np.random.Generator
-) -> NDArray[np.float64]:
-    """Gaussian timestamp error, truncated to +-0.45 of the shorter adjacent
-    interval so that the output stays strictly increasing."""
-    nxt = np.append(dt[1:], dt[-1])
-    limit = 0.45 * np.minimum(dt, nxt)
-    err = np.clip(sigma * rng.standard_normal(t.size), -limit, limit)
-    return t + err
+def _quantize(x: NDArray[np.float64], step: float, q_sum: NDArray[np.float64] | None = None,
+              q_count: NDArray[np.float64] | None = None
+              ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Residual-carrying quantiser: outputs are multiples of ``step`` and the running sum of the
+    outputs stays within step/2 of the running sum of ``x``. ``q_sum``/``q_count``: the input's
+    running sum and the output's count so far (zero at the start); returned updated."""
+    q_sum = np.zeros(x.shape[1]) if q_sum is None else q_sum
+    q_count = np.zeros(x.shape[1]) if q_count is None else q_count
+    sums = _running_sum(x, q_sum)
+    counts = np.rint(sums[1:] / step)
+    out = np.diff(np.concatenate([q_count[None, :], counts]), axis=0) * step
+    return out, sums[-1].copy(), (counts[-1] if len(counts) else q_count).copy()
+
+
+class ErrorStream:
+    """:func:`apply` in consecutive chunks of rows, with the same result as at once when every chunk
+    but the last is a multiple of :data:`BLOCK` rows long (one random stream per error source, drawn
+    in row order; the states carried from chunk to chunk).
+
+    ``t`` holds the true end times of all rows of the run (known before the increments are), so that
+    the timestamp jitter of a chunk's last row sees the next interval.
+    """
+
+    def __init__(self, model: ImuErrorModel, t: ArrayLike, seed: int, *, t_start: float | None = None) -> None:
+        t_arr = np.asarray(t, dtype=np.float64)
+        if t_arr.ndim != 1:
+            raise ValueError(f"expected t (N,), got {t_arr.shape}")
+        if t_start is None:
+            if t_arr.size < 2:
+                raise ValueError("t_start is required when there is a single row")
+            t_start = float(t_arr[0] - (t_arr[1] - t_arr[0]))
+        self.dt = np.diff(t_arr, prepend=t_start)
+        if not np.all(self.dt > 0.0):
+            raise ValueError("times must be strictly increasing and t_start < t[0]")
+        self.model = model
+        self.t = t_arr
+        self.rows = 0  # rows corrupted so far
+        rngs = _generators(seed)
+        self.rngs = rngs
+        self.gyro = _Triad(model.gyro, rngs, "gyro")
+        self.accel = _Triad(model.accel, rngs, "accel")
+
+    def corrupt(self, dtheta: ArrayLike, dv: ArrayLike
+                ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+        """The next rows: ``(t_out, dtheta_out, dv_out, kept)`` as :func:`apply` returns them."""
+        dth = np.asarray(dtheta, dtype=np.float64)
+        dvel = np.asarray(dv, dtype=np.float64)
+        a = self.rows
+        n = dth.shape[0] if dth.ndim == 2 else -1
+        b = a + n
+        if dth.shape != (n, 3) or dvel.shape != (n, 3) or b > self.t.size:
+            raise ValueError(f"expected dtheta (N,3), dv (N,3) for rows {a}.. of {self.t.size}; "
+                             f"got {dth.shape}, {dvel.shape}")
+        model = self.model
+        dt = self.dt[a:b]
+        coupling = dvel @ np.asarray(model.g_sensitivity).T if np.any(model.g_sensitivity) else None
+        dth_out = self.gyro.corrupt(dth, dt, a, coupling)
+        dv_out = self.accel.corrupt(dvel, dt, a, None)
+        t_out = self.t[a:b].copy()
+        if model.jitter_sigma > 0.0 and n > 0:
+            # Gaussian timestamp error, truncated to +-0.45 of the shorter adjacent interval so that
+            # the output stays strictly increasing
+            nxt = np.append(self.dt[a + 1:b + 1], self.dt[-1]) if b == self.t.size else self.dt[a + 1:b + 1]
+            limit = 0.45 * np.minimum(dt, nxt)
+            t_out = t_out + np.clip(model.jitter_sigma * self.rngs["jitter"].standard_normal(n), -limit, limit)
+        self.rows = b
+        kept = np.ones(n, dtype=bool)
+        if model.drop_probability > 0.0:
+            kept = self.rngs["drop"].random(n) >= model.drop_probability
+            return t_out[kept], dth_out[kept], dv_out[kept], kept
+        return t_out, dth_out, dv_out, kept
 
 
 def apply(
@@ -383,27 +470,7 @@ def apply(
         raise ValueError(f"expected t (N,), dtheta (N,3), dv (N,3); got {t_arr.shape}, {dth.shape}, {dvel.shape}")
     if n == 0:
         return t_arr.copy(), dth.copy(), dvel.copy(), np.ones(0, dtype=bool)
-    if t_start is None:
-        if n < 2:
-            raise ValueError("t_start is required when there is a single row")
-        t_start = float(t_arr[0] - (t_arr[1] - t_arr[0]))
-    dt = np.diff(t_arr, prepend=t_start)
-    if not np.all(dt > 0.0):
-        raise ValueError("times must be strictly increasing and t_start < t[0]")
-
-    rngs = _generators(seed)
-    coupling = dvel @ np.asarray(model.g_sensitivity).T if np.any(model.g_sensitivity) else None
-    dth_out = _corrupt_triad(model.gyro, dth, dt, rngs, "gyro", coupling)
-    dv_out = _corrupt_triad(model.accel, dvel, dt, rngs, "accel", None)
-
-    t_out = t_arr.copy()
-    if model.jitter_sigma > 0.0:
-        t_out = _jitter(t_arr, dt, model.jitter_sigma, rngs["jitter"])
-    kept = np.ones(n, dtype=bool)
-    if model.drop_probability > 0.0:
-        kept = rngs["drop"].random(n) >= model.drop_probability
-        return t_out[kept], dth_out[kept], dv_out[kept], kept
-    return t_out, dth_out, dv_out, kept
+    return ErrorStream(model, t_arr, seed, t_start=t_start).corrupt(dth, dvel)
 
 
 def apply_rows(

@@ -104,8 +104,23 @@ def parse(doc: dict[str, Any], source: str = "scenario") -> list[Fault]:
     return out
 
 
-def apply_channel(fault: Fault, x: np.ndarray, t_begin: np.ndarray, t_end: np.ndarray) -> np.ndarray:
-    """The increments ``x`` (N,) of one channel over intervals ``(t_begin, t_end]`` with ``fault``."""
+@dataclasses.dataclass
+class ChannelState:
+    """What a fault carries from one chunk of rows to the next: the noise fault's random stream, and
+    the rate of the last interval that ended at or before the fault's start (a stuck sensor holds it)."""
+
+    rng: np.random.Generator | None = None
+    rate_before: float = 0.0
+
+
+def apply_channel(fault: Fault, x: np.ndarray, t_begin: np.ndarray, t_end: np.ndarray,
+                  state: ChannelState | None = None) -> np.ndarray:
+    """The increments ``x`` (N,) of one channel over intervals ``(t_begin, t_end]`` with ``fault``.
+
+    ``state`` (kept by the caller across consecutive chunks of rows) makes chunks add up to the run at
+    once; without it the rows are the whole run.
+    """
+    state = ChannelState() if state is None else state
     x = np.array(x, dtype=float)
     dt = t_end - t_begin
     u1 = np.maximum(t_begin, fault.start)
@@ -118,30 +133,45 @@ def apply_channel(fault: Fault, x: np.ndarray, t_begin: np.ndarray, t_end: np.nd
     elif fault.kind == "ramp":  # integral of rate (tau - start) over [u1, u2]
         x += np.where(hit, 0.5 * fault.value * ((u2 - fault.start) ** 2 - (u1 - fault.start) ** 2), 0.0)
     elif fault.kind == "noise":
-        rng = np.random.default_rng(fault.seed)
-        x += fault.value * cover * rng.standard_normal(x.shape[0])
+        if state.rng is None:
+            state.rng = np.random.default_rng(fault.seed)
+        x += fault.value * cover * state.rng.standard_normal(x.shape[0])
     elif fault.kind == "scale":
         x += fault.value * 1e-6 * x * frac
     elif fault.kind == "dropout":
         x *= 1.0 - frac
     elif fault.kind == "stuck":
         before = np.flatnonzero(~hit & (t_end <= fault.start))
-        rate = x[before[-1]] / dt[before[-1]] if before.size and dt[before[-1]] > 0.0 else 0.0
-        x = x * (1.0 - frac) + rate * cover
+        if before.size and dt[before[-1]] > 0.0:
+            state.rate_before = x[before[-1]] / dt[before[-1]]
+        x = x * (1.0 - frac) + state.rate_before * cover
     return x
+
+
+class FaultStream:
+    """The faults that name one IMU, applied to consecutive chunks of its rows (:func:`apply` is one
+    chunk: the whole run)."""
+
+    def __init__(self, faults: list[Fault], imu: int) -> None:
+        self.mine = [f for f in faults if f.imu == imu]
+        self.states = [ChannelState() for _ in self.mine]
+
+    def apply(self, t_begin: np.ndarray, t_end: np.ndarray, dtheta: np.ndarray, dv: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray]:
+        """``(dtheta, dv)`` (N, 3) of the next rows with the faults (copies when any apply)."""
+        if not self.mine:
+            return dtheta, dv
+        dtheta, dv = dtheta.copy(), dv.copy()
+        for f, st in zip(self.mine, self.states):
+            arr = dtheta if f.sensor == "gyro" else dv
+            arr[:, f.axis] = apply_channel(f, arr[:, f.axis], t_begin, t_end, st)
+        return dtheta, dv
 
 
 def apply(faults: list[Fault], imu: int, t_begin: np.ndarray, t_end: np.ndarray, dtheta: np.ndarray,
           dv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(dtheta, dv)`` of IMU ``imu`` (N, 3) with the faults that name it (copies when any do)."""
-    mine = [f for f in faults if f.imu == imu]
-    if not mine:
-        return dtheta, dv
-    dtheta, dv = dtheta.copy(), dv.copy()
-    for f in mine:
-        arr = dtheta if f.sensor == "gyro" else dv
-        arr[:, f.axis] = apply_channel(f, arr[:, f.axis], t_begin, t_end)
-    return dtheta, dv
+    return FaultStream(faults, imu).apply(t_begin, t_end, dtheta, dv)
 
 
 def skewed_gyros(t0: float, t: np.ndarray, dtheta: np.ndarray, axes: np.ndarray, grade: str, seed: int,

@@ -9,7 +9,7 @@ import shutil
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Iterator
 
 import numpy as np
 
@@ -18,7 +18,7 @@ from mavins import files
 from . import errors, faults, polar
 from .polar import EarthFixedMotion
 from .scenarios import Scenario, apply_turntable, build
-from .trajectory import SimResult, simulate
+from .trajectory import SimResult, join, simulate_chunks
 
 FILE_NAMES = ("imu.csv", "imu_rates.csv", "truth.csv", "init.json")
 
@@ -64,50 +64,81 @@ def generate(
 
     ``usec_grid`` puts the samples on whole microseconds (for MAVLink streaming);
     ``imus`` (1..3) IMUs, the scenario's ``[[faults]]`` applied (sim/faults.py).
+    The run is :func:`generate_chunks`'s pieces joined, so a stream made in
+    pieces carries the same rows as the files.
     """
+    return join_runs(list(generate_chunks(scenario, duration=duration, rate=rate, seed=seed, grade=grade,
+                                          usec_grid=usec_grid, imus=imus)))
+
+
+def generate_chunks(
+    scenario: Scenario, *, duration: float | None = None, rate: float | None = None, seed: int = 0,
+    grade: str | None = None, usec_grid: bool = False, imus: int = 1,
+) -> Iterator[SimRun]:
+    """:func:`generate`'s run in consecutive pieces (sim.trajectory.chunk_bounds rows), each a SimRun of
+    its rows: the exact motion, the sensor errors (sim.errors.ErrorStream) and the faults
+    (sim.faults.FaultStream) carried from piece to piece. The arguments are checked here; the motion is
+    computed piece by piece as the iterator is consumed."""
     traj = build(scenario)
     length = traj.t - traj.t0
-    dur = duration if duration is not None else (scenario.duration or length)
+    dur = run_duration(scenario, duration, traj)
     if dur <= 0:
         raise ValueError(f"duration must be positive, got {dur}")
     hz = rate if rate is not None else scenario.rate
     if hz <= 0:
         raise ValueError(f"rate must be positive, got {hz}")
+    if not 1 <= imus <= 3:
+        raise ValueError(f"imus must be 1..3, got {imus}")
     check_size(scenario, duration=dur, rate=hz)  # before anything is allocated
-    if length < dur:
-        traj.static(dur - length)
-    apply_turntable(scenario, traj, traj.t0 + dur)
-    if isinstance(traj, EarthFixedMotion):
-        exact = polar.simulate(traj, hz, dur, usec_grid=usec_grid)
-    else:
-        exact = simulate(traj, hz, dur, usec_grid=usec_grid)
-    g = grade if grade is not None else scenario.grade
-    model = errors.grade(g)
-    t, dth, dv, kept = errors.apply(model, exact.t, exact.dtheta, exact.dv, seed, t_start=exact.t0)
     flist = faults.parse(scenario.doc, scenario.source)
     if any(f.imu >= imus for f in flist):
         raise ValueError(f"{scenario.source}: a fault names IMU {max(f.imu for f in flist)}, "
                          f"but the run has {imus} IMU(s) (--imus)")
-    begin = np.concatenate(([exact.t0], exact.t[:-1]))[kept]
-    end = exact.t[kept]
-    dth, dv = faults.apply(flist, 0, begin, end, dth, dv)
-    return SimRun(scenario, hz, g, seed, exact, t, dth, dv, kept,
-                  _extra_imus(model, exact, kept, seed, imus, flist, begin, end))
-
-
-def _extra_imus(model: errors.ImuErrorModel, exact: SimResult, kept: np.ndarray, seed: int, imus: int,
-                flist: list[faults.Fault], begin: np.ndarray, end: np.ndarray
-                ) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
-    """Increments of IMUs 1..imus-1 on the primary's kept rows: own error draws (seed + 7919 k), no
-    jitter or drops of their own (one clock samples them all), their faults applied."""
-    if not 1 <= imus <= 3:
-        raise ValueError(f"imus must be 1..3, got {imus}")
+    if length < dur:
+        traj.static(dur - length)
+    apply_turntable(scenario, traj, traj.t0 + dur)
+    if isinstance(traj, EarthFixedMotion):
+        pieces = polar.simulate_chunks(traj, hz, dur, usec_grid=usec_grid)
+    else:
+        pieces = simulate_chunks(traj, hz, dur, usec_grid=usec_grid)
+    g = grade if grade is not None else scenario.grade
+    model = errors.grade(g)
+    t0 = traj.t0
+    primary = errors.ErrorStream(model, pieces.t, seed, t_start=t0) if pieces.n else None
+    # IMUs 1..imus-1: own error draws (seed + 7919 k), no jitter or drops of their own (one clock samples
+    # them all), their faults applied, on the primary's kept rows
     quiet = dataclasses.replace(model, jitter_sigma=0.0, drop_probability=0.0)
-    out = []
-    for k in range(1, imus):
-        _, dth, dv, _ = errors.apply(quiet, exact.t, exact.dtheta, exact.dv, seed + 7919 * k, t_start=exact.t0)
-        out.append(faults.apply(flist, k, begin, end, dth[kept], dv[kept]))
-    return tuple(out)
+    extras = [errors.ErrorStream(quiet, pieces.t, seed + 7919 * k, t_start=t0) for k in range(1, imus)] \
+        if pieces.n else []
+    fault_streams = [faults.FaultStream(flist, k) for k in range(imus)]
+
+    def run() -> Iterator[SimRun]:
+        for exact in pieces:
+            if primary is None:
+                empty = np.empty((0, 3))
+                yield SimRun(scenario, hz, g, seed, exact, exact.t, empty, empty, np.ones(0, bool))
+                return
+            t, dth, dv, kept = primary.corrupt(exact.dtheta, exact.dv)
+            begin = np.concatenate(([exact.t0], exact.t[:-1]))[kept]
+            end = exact.t[kept]
+            dth, dv = fault_streams[0].apply(begin, end, dth, dv)
+            more = []
+            for k, stream in enumerate(extras, start=1):
+                _, dth_k, dv_k, _ = stream.corrupt(exact.dtheta, exact.dv)
+                more.append(fault_streams[k].apply(begin, end, dth_k[kept], dv_k[kept]))
+            yield SimRun(scenario, hz, g, seed, exact, t, dth, dv, kept, tuple(more))
+
+    return run()
+
+
+def join_runs(parts: list[SimRun]) -> SimRun:
+    """One SimRun of consecutive pieces (generate_chunks)."""
+    first = parts[0]
+    extra = tuple((np.concatenate([p.extra[k][0] for p in parts]), np.concatenate([p.extra[k][1] for p in parts]))
+                  for k in range(len(first.extra)))
+    return SimRun(first.scenario, first.rate, first.grade, first.seed, join([p.exact for p in parts]),
+                  np.concatenate([p.t for p in parts]), np.concatenate([p.dtheta for p in parts]),
+                  np.concatenate([p.dv for p in parts]), np.concatenate([p.kept for p in parts]), extra)
 
 
 def extra_names(imus: int) -> tuple[str, ...]:
@@ -163,6 +194,16 @@ MEMORY_PER_SAMPLE = 1600
 DISK_PER_SAMPLE = 700
 
 
+def run_duration(scenario: Scenario, duration: float | None, traj: object = None) -> float:
+    """Seconds a run lasts: ``duration`` when given, else the scenario's, else its trajectory's length."""
+    if duration is not None:
+        return duration
+    if scenario.duration:
+        return scenario.duration
+    traj = build(scenario) if traj is None else traj
+    return traj.t - traj.t0  # type: ignore[attr-defined]
+
+
 def samples(duration: float, rate: float) -> int:
     """IMU samples of a run (simulate()'s grid t0 + k/rate, k = 1..n)."""
     return int(math.floor(duration * rate + 1e-9))
@@ -175,10 +216,7 @@ def check_size(scenario: Scenario, *, duration: float | None, rate: float | None
     too large; call it before generate() so nothing is computed in vain.
     """
     hz = rate if rate is not None else scenario.rate
-    if duration is None:
-        traj = build(scenario)
-        duration = scenario.duration or (traj.t - traj.t0)
-    dur = duration
+    dur = run_duration(scenario, duration)
     if not (dur > 0 and hz > 0 and math.isfinite(dur) and math.isfinite(hz)):
         raise ValueError(f"duration and rate must be positive and finite, got {dur:g} s at {hz:g} Hz")
     n = samples(dur, hz)

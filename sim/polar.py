@@ -183,18 +183,40 @@ def increments(m: EarthFixedMotion, t_prev: float, t: np.ndarray, substeps: int)
 
 def simulate(m: EarthFixedMotion, rate: float, duration: float | None = None, usec_grid: bool = False):
     """Sample the motion at ``rate`` Hz: a sim.trajectory.SimResult (its ``spec`` is None)."""
-    from .trajectory import SimResult
+    from .trajectory import join
+
+    return join(list(simulate_chunks(m, rate, duration, usec_grid)))
+
+
+def simulate_chunks(m: EarthFixedMotion, rate: float, duration: float | None = None, usec_grid: bool = False):
+    """:func:`simulate` in the pieces of sim.trajectory.chunk_bounds (each a SimResult whose ``t0`` and
+    truth row 0 are the previous piece's last); ``n`` is the run's number of samples."""
+    from .trajectory import sample_times
 
     dur = (m.t - m.t0) if duration is None else duration
     n = math.floor(dur * rate + 1e-9)
-    k = np.arange(1, n + 1)
-    t = m.t0 + (np.round(k * (1e6 / rate)) / 1e6 if usec_grid else k / rate)
-    substeps = max(1, math.ceil(1.0 / (rate * MAX_SUBSTEP)))
-    dtheta = np.empty((n, 3))
-    dv = np.empty((n, 3))
-    chunk = 20000
-    for a in range(0, n, chunk):
-        b = min(a + chunk, n)
-        dtheta[a:b], dv[a:b] = increments(m, m.t0 if a == 0 else float(t[a - 1]), t[a:b], substeps)
-    truth = truth_rows(m, np.concatenate(([m.t0], t)))
-    return SimResult(m.t0, t, dtheta, dv, truth, None)  # type: ignore[arg-type]
+    return _Chunks(m, sample_times(m.t0, n, rate, usec_grid), max(1, math.ceil(1.0 / (rate * MAX_SUBSTEP))))
+
+
+@dataclass
+class _Chunks:
+    """The pieces of an Earth-fixed run, made when iterated."""
+
+    m: EarthFixedMotion
+    t: np.ndarray
+    substeps: int
+
+    @property
+    def n(self) -> int:
+        return int(self.t.shape[0])
+
+    def __iter__(self):  # type: ignore[no-untyped-def]
+        from .trajectory import SimResult, chunk_bounds
+
+        t_prev = self.m.t0
+        for a, b in chunk_bounds(self.n):
+            t = self.t[a:b]
+            dtheta, dv = increments(self.m, t_prev, t, self.substeps) if b > a else (np.empty((0, 3)), np.empty((0, 3)))
+            yield SimResult(t_prev, t.copy(), dtheta, dv, truth_rows(self.m, np.concatenate(([t_prev], t))),
+                            None)  # type: ignore[arg-type]
+            t_prev = float(t[-1]) if len(t) else t_prev

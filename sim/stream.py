@@ -27,10 +27,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import queue
 import threading
 import time
 from dataclasses import dataclass
-from typing import Callable, Iterator
+from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
@@ -40,6 +41,7 @@ from .generate import SimRun
 from .trajectory import instant_rates
 
 from mavins.link.mavlink import mavlink, mavutil
+from mavins.progress import Progress
 
 G0 = 9.80665  # ArduPilot's mG scale (m/s^2 per 1000 mG)
 HIGHRES_ACC_GYRO = 0b111111  # fields_updated: x/y/z acc and gyro
@@ -78,15 +80,34 @@ class StreamStats:
     messages: int = 0
 
 
-def _every(times: np.ndarray, rate: float) -> np.ndarray:
-    """Boolean mask: the first sample at or after each multiple of 1/rate."""
+def _every(times: np.ndarray, rate: float, last: float | None = None) -> tuple[np.ndarray, float | None]:
+    """Boolean mask: the first sample at or after each multiple of 1/rate (``last``: the period index of
+    the sample before ``times[0]``, None at the start); and the period index of the last sample."""
+    if len(times) == 0:
+        return np.zeros(0, bool), last
     k = np.floor(times * rate + 1e-9)
-    return np.concatenate(([True], k[1:] != k[:-1]))
+    prev = np.concatenate(([np.nan if last is None else last], k[:-1]))
+    return k != prev, float(k[-1])
 
 
-def frames(run: SimRun, mav: mavlink.MAVLink, opts: StreamOptions) -> Iterator[tuple[float, list[mavlink.MAVLink_message]]]:
-    """Yield (sensor time s, messages) for each IMU sample, in order."""
+def frames(run: SimRun | Iterable[SimRun], mav: mavlink.MAVLink, opts: StreamOptions
+           ) -> Iterator[tuple[float, list[mavlink.MAVLink_message]]]:
+    """Yield (sensor time s, messages) for each IMU sample, in order: of one run, or of the consecutive
+    pieces of sim.generate.generate_chunks (each piece's messages made as it arrives)."""
     rng = np.random.default_rng(opts.seed + 1)
+    mag_rng = np.random.default_rng([opts.seed, 0x6E3])  # apart from the GPS/baro noise
+    last: dict[str, float | None] = {}
+    whole = isinstance(run, SimRun)
+    for piece in ([run] if whole else run):
+        if not whole and len(piece.extra) < opts.imus - 1:
+            raise ValueError(f"streaming {opts.imus} IMUs from pieces: make them with generate_chunks(imus={opts.imus})")
+        yield from _piece_frames(piece, mav, opts, rng, mag_rng, last)
+
+
+def _piece_frames(run: SimRun, mav: mavlink.MAVLink, opts: StreamOptions, rng: np.random.Generator,
+                  mag_rng: np.random.Generator, last: dict[str, float | None]
+                  ) -> Iterator[tuple[float, list[mavlink.MAVLink_message]]]:
+    """frames() of one run or piece; ``last`` carries the periods of the message rates between pieces."""
     if opts.imu_rates == "averaged" or opts.msg == "raw":
         # each message averages over its own (true) sample interval, like PX4's
         # integral over the last period: after a dropped sample it does not cover the gap
@@ -102,13 +123,17 @@ def frames(run: SimRun, mav: mavlink.MAVLink, opts: StreamOptions) -> Iterator[t
     extra = _extra_imus(run, opts)
     truth = run.exact.truth[1:][run.kept]
     t = run.t
-    send_truth = _every(t, opts.truth_rate)
-    send_gps = _every(t, opts.gps_rate)
-    send_baro = _every(t, opts.baro_rate)
-    send_att = _every(t, opts.attitude_rate)
-    send_hb = _every(t, 1.0)
-    send_mag = _every(t, opts.mag_rate) if opts.mag_rate > 0 and opts.msg == "highres" else np.zeros(len(t), bool)
-    mag_rng = np.random.default_rng([opts.seed, 0x6E3])  # apart from the GPS/baro noise above
+
+    def every(name: str, rate: float) -> np.ndarray:
+        mask, last[name] = _every(t, rate, last.get(name))
+        return mask
+
+    send_truth = every("truth", opts.truth_rate)
+    send_gps = every("gps", opts.gps_rate)
+    send_baro = every("baro", opts.baro_rate)
+    send_att = every("attitude", opts.attitude_rate)
+    send_hb = every("heartbeat", 1.0)
+    send_mag = every("mag", opts.mag_rate) if opts.mag_rate > 0 and opts.msg == "highres" else np.zeros(len(t), bool)
     for i in range(len(t)):
         usec = int(round(t[i] * 1e6))
         out: list[mavlink.MAVLink_message] = []
@@ -185,26 +210,78 @@ def _extra_imus(run: SimRun, opts: StreamOptions) -> list[tuple[np.ndarray, np.n
     return out
 
 
-def stream(run: SimRun, url: str, opts: StreamOptions, stop: threading.Event | None = None,
-           hold: Callable[[int], None] | None = None) -> StreamStats:
-    """Send the run to a pymavlink connection URL (e.g. ``udpout:127.0.0.1:14551``).
+def ahead(pieces: Iterable[SimRun], depth: int = 2) -> Iterator[SimRun]:
+    """The pieces, made in a background thread up to ``depth`` ahead of the consumer (the simulator's
+    kernels release the GIL, so making the next piece overlaps sending this one). An error while making
+    them is raised here, after the pieces made before it; closing the iterator stops the thread."""
+    box: queue.Queue = queue.Queue(maxsize=depth)
+    end = object()
+    quit_ = threading.Event()
+    failure: list[BaseException] = []
+
+    def put(item: object) -> bool:
+        while not quit_.is_set():
+            try:
+                box.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def work() -> None:
+        try:
+            for piece in pieces:
+                if not put(piece):
+                    return
+        except BaseException as exc:  # handed to the consumer
+            failure.append(exc)
+        put(end)
+
+    thread = threading.Thread(target=work, name="sim-pieces", daemon=True)
+    thread.start()
+    try:
+        while True:
+            item = box.get()
+            if item is end:
+                break
+            yield item
+        if failure:
+            raise failure[0]
+    finally:
+        quit_.set()
+
+
+def stream(run: SimRun | Iterable[SimRun], url: str, opts: StreamOptions, stop: threading.Event | None = None,
+           hold: Callable[[int], None] | None = None, progress: Progress | None = None) -> StreamStats:
+    """Send the run to a pymavlink connection URL (e.g. ``udpout:127.0.0.1:14551``): one SimRun, or the
+    pieces of sim.generate.generate_chunks, made ahead in a background thread (:func:`ahead`) so that
+    the first message leaves as soon as the first piece is made.
 
     ``hold(n)``, when given, is called before each sample's messages with the number sent so far and may
     block until the receiver has caught up (``mavins demo --speed max``: a UDP socket holds a few hundred
-    datagrams, and what overflows it is lost).
+    datagrams, and what overflows it is lost). ``progress`` is updated with the sensor time sent.
     """
     conn = mavutil.mavlink_connection(url, source_system=opts.sysid, source_component=opts.compid, dialect="ardupilotmega")
     stats = StreamStats()
-    t_wall0 = time.monotonic()
-    t_sim0 = run.exact.t0
+    start: list[float] = []  # the run's start (sensor time) and the wall clock then
+    made = None if isinstance(run, SimRun) else ahead(run)
+
+    def paced(source: Iterable[SimRun]) -> Iterator[SimRun]:
+        for piece in source:
+            if not start:
+                start.extend((piece.exact.t0, time.monotonic()))
+            yield piece
+
+    if isinstance(run, SimRun):
+        start.extend((run.exact.t0, time.monotonic()))
     try:
-        for t_s, msgs in frames(run, conn.mav, opts):
+        for t_s, msgs in frames(run if made is None else paced(made), conn.mav, opts):
             if stop is not None and stop.is_set():
                 break
             if hold is not None:
                 hold(stats.messages)
             if opts.speed is not None:
-                delay = t_wall0 + (t_s - t_sim0) / opts.speed - time.monotonic()
+                delay = start[1] + (t_s - start[0]) / opts.speed - time.monotonic()
                 if delay > 0:
                     time.sleep(delay)
             for m in msgs:
@@ -212,7 +289,10 @@ def stream(run: SimRun, url: str, opts: StreamOptions, stop: threading.Event | N
                 stats.messages += 1
             stats.imu_messages += 1
             stats.truth_messages += sum(1 for m in msgs if m.get_msgId() == mavlink.MAVLINK_MSG_ID_SIM_STATE)
+            if progress is not None:
+                progress.update(t_s - start[0])
     finally:
         conn.close()
+        if made is not None:
+            made.close()  # type: ignore[attr-defined]
     return stats
-

@@ -13,6 +13,7 @@ compiled kernels of sim.kinematics.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -419,6 +420,24 @@ class SimResult:
         return dict(t=r[0], lat=r[1], lon=r[2], h=r[3], vn=r[4], ve=r[5], vd=r[6], roll=r[7], pitch=r[8], yaw=r[9])
 
 
+# Rows per piece of a run made in pieces (simulate_chunks): the first small, so a stream starts at
+# once, the others larger; both multiples of sim.errors.BLOCK, so the error streams' pieces line up.
+FIRST_ROWS = 4096
+CHUNK_ROWS = 16384
+
+
+def sample_times(t0: float, n: int, rate: float, usec_grid: bool) -> np.ndarray:
+    """The n sample times ``t0 + k/rate`` (k = 1..n), rounded to whole microseconds with ``usec_grid``."""
+    k = np.arange(1, n + 1)
+    return t0 + (np.round(k * (1e6 / rate)) / 1e6 if usec_grid else k / rate)
+
+
+def chunk_bounds(n: int, first: int = FIRST_ROWS, rows: int = CHUNK_ROWS) -> list[tuple[int, int]]:
+    """Row ranges [a, b) of a run of n rows made in pieces: ``first`` rows, then ``rows`` at a time."""
+    edges = [0] + list(range(min(first, n), n, rows)) + [n]
+    return [(a, b) for a, b in zip(edges[:-1], edges[1:]) if b > a] or [(0, 0)]
+
+
 def simulate(
     traj: Trajectory | MotionSpec, rate: float, duration: float | None = None, substeps: int | None = None,
     usec_grid: bool = False,
@@ -430,37 +449,68 @@ def simulate(
     exactly (for streaming; at rates that do not divide 1 MHz the intervals are
     then slightly uneven, which N-sample algorithms notice).
 
-    Sub-steps default to keeping ``2 pi f_max h <= 0.5`` for the highest
-    superposed frequency, so the 5-point Gauss-Legendre quadrature error
-    (~(W h)^10 / 1e12) sits below double precision.
+    Sub-steps default to one per 10 ms; the quadrature takes as many nodes as its
+    remainder bound asks for the highest superposed frequency
+    (sim.kinematics.quadrature_order). The run is made in the pieces of
+    :func:`simulate_chunks` and joined.
     """
-    spec = traj if isinstance(traj, MotionSpec) else traj.spec(None if duration is None else traj.t0 + duration)
-    t_end = spec.t_end if duration is None else spec.t0 + duration
-    dt = 1.0 / rate
-    n = int(math.floor((t_end - spec.t0) / dt + 1e-9))
-    k = np.arange(1, n + 1)
-    t = spec.t0 + (np.round(k * (1e6 / rate)) / 1e6 if usec_grid else k / rate)
-    if substeps is None:
-        substeps = max(1, math.ceil(dt / 0.01))
-    nodes, weights = kin.gauss_legendre(kin.quadrature_order(2 * math.pi * spec.max_freq * dt / substeps))
-    dtheta = np.empty((n, 3))
-    dv = np.empty((n, 3))
-    pos = np.empty((n, 3))
-    rows = np.empty((n + 1, 13))
-    p0 = (spec.lat, spec.lon) if spec.use_earth else (0.0, 0.0)
-    chunk = 20000
-    with Progress("simulate", n) as bar:
-        t_prev, p_prev = spec.t0, (p0[0], p0[1], spec.h)
-        for a in range(0, n, chunk):
-            b = min(a + chunk, n)
-            kin.integrate(t_prev, t[a:b], substeps, nodes, weights, p_prev[0], p_prev[1], p_prev[2], spec.starts, spec.durs,
-                          spec.coefs, spec.counts, spec.vib, spec.consts, spec.linvib, spec.use_earth,
-                          spec.breaks, dtheta[a:b], dv[a:b], pos[a:b], rows[a + 1:b + 1])
-            t_prev, p_prev = t[b - 1], (pos[b - 1, 0], pos[b - 1, 1], pos[b - 1, 2])
-            bar.update(b)
-    tt = np.concatenate(([spec.t0], t))
-    kin.truth(tt[:1], spec.starts, spec.durs, spec.coefs, spec.counts, spec.vib, spec.consts, spec.linvib, rows[:1])
-    pos = np.vstack(([p0[0], p0[1], spec.h], pos))
+    parts = simulate_chunks(traj, rate, duration, substeps, usec_grid)
+    with Progress("simulate", parts.n) as bar:
+        out = []
+        for part in parts:
+            out.append(part)
+            bar.update(sum(len(p.t) for p in out))
+    return join(out)
+
+
+def simulate_chunks(traj: Trajectory | MotionSpec, rate: float, duration: float | None = None,
+                    substeps: int | None = None, usec_grid: bool = False) -> ChunkedRun:
+    """:func:`simulate`'s run in consecutive pieces (:class:`ChunkedRun`)."""
+    return ChunkedRun(traj, rate, duration, substeps, usec_grid)
+
+
+class ChunkedRun:
+    """:func:`simulate`'s run in consecutive pieces (rows :func:`chunk_bounds`), each a SimResult of its
+    rows whose ``t0`` and truth row 0 are the previous piece's last (the start, for the first);
+    ``n`` is the run's number of samples. Nothing is computed before the first piece is asked for."""
+
+    def __init__(self, traj: Trajectory | MotionSpec, rate: float, duration: float | None = None,
+                 substeps: int | None = None, usec_grid: bool = False) -> None:
+        spec = traj if isinstance(traj, MotionSpec) else traj.spec(None if duration is None else traj.t0 + duration)
+        t_end = spec.t_end if duration is None else spec.t0 + duration
+        dt = 1.0 / rate
+        self.n = int(math.floor((t_end - spec.t0) / dt + 1e-9))
+        self.t = sample_times(spec.t0, self.n, rate, usec_grid)
+        self.spec = spec
+        self.substeps = max(1, math.ceil(dt / 0.01)) if substeps is None else substeps
+        self.nodes, self.weights = kin.gauss_legendre(
+            kin.quadrature_order(2 * math.pi * spec.max_freq * dt / self.substeps))
+
+    def __iter__(self) -> Iterator[SimResult]:
+        spec, t = self.spec, self.t
+        p0 = (spec.lat, spec.lon) if spec.use_earth else (0.0, 0.0)
+        pos_prev = np.array([p0[0], p0[1], spec.h])
+        row_prev = np.empty((1, 13))
+        kin.truth(np.array([spec.t0]), spec.starts, spec.durs, spec.coefs, spec.counts, spec.vib, spec.consts,
+                  spec.linvib, row_prev)
+        t_prev = spec.t0
+        for a, b in chunk_bounds(self.n):
+            m = b - a
+            dtheta, dv, pos = np.empty((m, 3)), np.empty((m, 3)), np.empty((m + 1, 3))
+            rows = np.empty((m + 1, 13))
+            rows[0], pos[0] = row_prev[-1], pos_prev
+            kin.integrate(t_prev, t[a:b], self.substeps, self.nodes, self.weights, pos_prev[0], pos_prev[1],
+                          pos_prev[2], spec.starts, spec.durs, spec.coefs, spec.counts, spec.vib, spec.consts,
+                          spec.linvib, spec.use_earth, spec.breaks, dtheta, dv, pos[1:], rows[1:])
+            tt = np.concatenate(([t_prev], t[a:b]))
+            yield SimResult(t_prev, t[a:b].copy(), dtheta, dv, _truth_table(spec, tt, pos, rows), spec)
+            t_prev, pos_prev, row_prev = (tt[-1], pos[-1].copy(), rows[-1:].copy())
+
+
+def _truth_table(spec: MotionSpec, tt: np.ndarray, pos: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """SimResult.TRUTH_COLUMNS at times tt from the positions (lat, lon, h or flat north, east, -h) and
+    the kernel's truth rows (sim.kinematics.truth_row)."""
+    n = tt.shape[0]
     if spec.use_earth:
         lat, lon = pos[:, 0], pos[:, 1]
     else:
@@ -468,23 +518,29 @@ def simulate(
         r_n, r_e = earth.radii(spec.lat)
         lat = spec.lat + pos[:, 0] / (r_n + spec.h)
         lon = spec.lon + pos[:, 1] / ((r_e + spec.h) * math.cos(spec.lat))
-    h = pos[:, 2]
-    truth = np.empty((n + 1, 19))
+    truth = np.empty((n, 19))
     truth[:, 0] = tt
     truth[:, 1] = np.degrees(lat)
     truth[:, 2] = np.degrees(lon)
-    truth[:, 3] = h
+    truth[:, 3] = pos[:, 2]
     truth[:, 4:7] = rows[:, 0:3]
-    q = rows[:, 3:7]
-    truth[:, 10:14] = q
-    euler = np.empty((n + 1, 3))
-    kin.euler_rows(np.ascontiguousarray(q), euler)
+    truth[:, 10:14] = rows[:, 3:7]
+    euler = np.empty((n, 3))
+    kin.euler_rows(np.ascontiguousarray(rows[:, 3:7]), euler)
     truth[:, 7:10] = np.degrees(euler)
     kin.euler_rows(np.ascontiguousarray(rows[:, 7:11]), euler)
     truth[:, 14:17] = np.degrees(euler)
     truth[:, 17] = np.degrees(rows[:, 11])
     truth[:, 18] = np.degrees(rows[:, 12])
-    return SimResult(spec.t0, t, dtheta, dv, truth, spec)
+    return truth
+
+
+def join(parts: list[SimResult]) -> SimResult:
+    """One SimResult of consecutive pieces (each piece's truth row 0 is the previous piece's last)."""
+    first = parts[0]
+    return SimResult(first.t0, np.concatenate([p.t for p in parts]), np.concatenate([p.dtheta for p in parts]),
+                     np.concatenate([p.dv for p in parts]),
+                     np.concatenate([first.truth] + [p.truth[1:] for p in parts[1:]]), first.spec)
 
 
 def instant_rates(res: SimResult) -> tuple[np.ndarray, np.ndarray]:

@@ -373,7 +373,7 @@ def test_quantisation_residual_carries() -> None:
     step=st.floats(1e-3, 10.0),
 )
 def test_quantiser_property(x: np.ndarray, step: float) -> None:
-    _check_quantized(E._quantize(x, step), x, step)
+    _check_quantized(E._quantize(x, step)[0], x, step)
 
 
 def test_dropped_samples_fraction() -> None:
@@ -400,3 +400,45 @@ def test_jitter_keeps_times_increasing_and_increments_true() -> None:
     # Jitter far larger than the sample period is truncated, never reorders.
     t_big, *_ = E.apply(ImuErrorModel(jitter_sigma=10 * DT, drop_probability=0.3), t, dth, dv, seed=52)
     assert np.all(np.diff(t_big) > 0.0)
+
+
+@pytest.mark.parametrize("grade", [g for g in E.GRADES if g != "ideal"])
+def test_error_stream_in_chunks_equals_the_run_at_once(grade: str) -> None:
+    """Chunks starting on multiples of BLOCK rows give the rows apply() gives at once, bit for bit:
+    the same random streams drawn in row order, Gauss-Markov, rate random walk and quantiser states
+    carried, the last row's jitter limit from the next interval (g-sensitivity coupling included)."""
+    rng = np.random.default_rng(5)
+    n = 3 * E.BLOCK + 123
+    t = 10.0 + np.arange(1, n + 1) / 400.0
+    dth = rng.normal(0.0, 1e-3, (n, 3))
+    dv = rng.normal(0.0, 1e-2, (n, 3)) + [0.0, 0.0, -9.8 / 400.0]
+    model = dataclasses.replace(E.grade(grade), g_sensitivity=((1e-4, 0.0, 0.0), (0.0, 2e-4, 0.0), (0.0, 0.0, 3e-4)),
+                                drop_probability=0.01, jitter_sigma=1e-4)
+    whole = E.apply(model, t, dth, dv, 17, t_start=10.0)
+    stream = E.ErrorStream(model, t, 17, t_start=10.0)
+    parts = [stream.corrupt(dth[a:b], dv[a:b]) for a, b in ((0, E.BLOCK), (E.BLOCK, 3 * E.BLOCK), (3 * E.BLOCK, n))]
+    for k in range(4):
+        assert np.array_equal(np.concatenate([p[k] for p in parts]), whole[k])
+    assert 0 < np.count_nonzero(~whole[3]) < 0.03 * n  # drops and jitter exercised
+    assert np.all(np.diff(whole[0]) > 0) and not np.array_equal(whole[0], t[whole[3]])
+    with pytest.raises(ValueError, match="rows"):
+        stream.corrupt(dth[:1], dv[:1])  # past the run's last row
+
+
+def test_error_stream_bias_matches_bias_states() -> None:
+    """bias_states() draws the same Gauss-Markov and rate-random-walk states as the chunked stream: the
+    industrial gyro's increments minus the truth average the bias between boundaries (white noise off)."""
+    model = E.grade("industrial")
+    quiet = dataclasses.replace(model, gyro=dataclasses.replace(model.gyro, random_walk=0.0, quantization=0.0,
+                                                                scale_factor_ppm=(0.0,) * 3,
+                                                                misalignment=((0.0,) * 3,) * 3),
+                                g_sensitivity=((0.0,) * 3,) * 3, jitter_sigma=0.0, drop_probability=0.0)
+    n = 2 * E.BLOCK + 7
+    t = np.arange(1, n + 1) / 200.0
+    zeros = np.zeros((n, 3))
+    stream = E.ErrorStream(quiet, t, 3, t_start=0.0)
+    out = np.concatenate([stream.corrupt(zeros[:E.BLOCK], zeros[:E.BLOCK])[1],
+                          stream.corrupt(zeros[E.BLOCK:], zeros[E.BLOCK:])[1]])
+    b_g, _ = E.bias_states(quiet, t, 3, t_start=0.0)
+    np.testing.assert_allclose(out, 0.5 * (b_g[:-1] + b_g[1:]) * np.diff(t, prepend=0.0)[:, None], rtol=1e-12,
+                               atol=1e-20)

@@ -487,3 +487,92 @@ def test_the_service_aids_with_the_streamed_magnetometer() -> None:
     assert counts[1][:2] == (0, 0)
     accepted, rejected, after = counts[0]
     assert rejected == 0 and after >= 10 and after - 1 <= accepted <= after, counts
+
+
+def test_pieces_stream_the_messages_of_the_whole_run(scenario_dir) -> None:
+    """A run made in pieces (generate_chunks: 4,096 rows, then 16,384) gives frames() the same messages,
+    byte for byte, as the run made at once: sensor errors, drops, extra IMUs, magnetometer, GPS and baro
+    noise and the message rates carried across the pieces' seams (consumer grade: jitter and drops)."""
+    from sim.generate import generate_chunks
+
+    sc = load(str(scenario_dir / "moving.toml"))
+    kw = dict(duration=250.0, grade="consumer", seed=1, usec_grid=True, imus=2)  # seed 1 drops 4 rows
+    opts = StreamOptions(speed=None, imus=2, mag_rate=7.0, gps_rate=3.0)
+    pieces = list(generate_chunks(sc, **kw))
+    assert [len(p.exact.t) for p in pieces] == [4096, 16384, 4520]
+    whole = generate(sc, **kw)
+    assert np.count_nonzero(~whole.kept) > 0
+
+    def packed(src) -> list[bytes]:
+        mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
+        return [m.pack(mav) for _, ms in frames(src, mav, opts) for m in ms]
+
+    assert packed(iter(pieces)) == packed(whole)
+
+
+def test_stream_sends_before_the_last_piece_is_made(scenario_dir) -> None:
+    """stream() of pieces sends the first piece's messages while the next ones are still being made: the
+    pieces' source here refuses to make its last piece until a message has arrived at the receiver, so a
+    stream that waited for every piece first would never send one (the wait would time out)."""
+    from sim.generate import generate_chunks
+
+    sc = load(str(scenario_dir / "moving.toml"))
+    arrived = threading.Event()
+    made_after_arrival: list[bool] = []
+
+    def source():
+        pieces = list(generate_chunks(sc, duration=200.0, usec_grid=True))
+        yield from pieces[:-1]
+        made_after_arrival.append(arrived.wait(EVENT_TIMEOUT_S))
+        yield pieces[-1]
+
+    port = _free_udp_port()
+    rx = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", dialect="ardupilotmega")
+    roomy(rx.port)
+    result: dict = {}
+    th = threading.Thread(target=lambda: result.setdefault(
+        "stats", stream(source(), f"udpout:127.0.0.1:{port}", StreamOptions(speed=None))), daemon=True)
+    th.start()
+    try:
+        first = rx.recv_match(blocking=True, timeout=EVENT_TIMEOUT_S)
+        assert first is not None
+        arrived.set()
+        th.join(EVENT_TIMEOUT_S)
+    finally:
+        rx.close()
+    assert made_after_arrival == [True]
+    assert result["stats"].imu_messages == 20000
+
+
+def test_ahead_raises_the_error_of_a_later_piece_after_the_earlier_ones() -> None:
+    """An error while making a piece reaches the consumer after the pieces made before it; closing the
+    iterator early stops the maker."""
+    from sim.stream import ahead
+
+    def source():
+        yield 1
+        yield 2
+        raise ValueError("piece 3 failed")
+
+    got = []
+    with pytest.raises(ValueError, match="piece 3 failed"):
+        for item in ahead(source()):  # type: ignore[arg-type]
+            got.append(item)
+    assert got == [1, 2]
+    made = []
+
+    def endless():
+        k = 0
+        while True:
+            made.append(k)
+            yield k
+            k += 1
+
+    it = ahead(endless(), depth=2)  # type: ignore[arg-type]
+    assert next(it) == 0
+    it.close()
+    deadline = time.monotonic() + EVENT_TIMEOUT_S
+    while any(th.name == "sim-pieces" for th in threading.enumerate()) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not any(th.name == "sim-pieces" for th in threading.enumerate())  # the maker thread ended
+    assert len(made) <= 4  # the one taken, the depth ahead, and the one it was putting
