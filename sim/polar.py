@@ -109,6 +109,27 @@ def _gravity_rows(sl: np.ndarray, r_e: np.ndarray, h: float) -> np.ndarray:
     return out
 
 
+@kernel
+def _tilt_rows(roll: np.ndarray, pitch: np.ndarray) -> np.ndarray:
+    """``C_b^T = euler_to_dcm(roll, pitch, 0)`` at each row (n, 3, 3)."""
+    out = np.empty((roll.shape[0], 3, 3))
+    for i in range(roll.shape[0]):
+        out[i] = euler_to_dcm(roll[i], pitch[i], 0.0)
+    return out
+
+
+@kernel
+def _ned_rows(lat: np.ndarray, lon: np.ndarray, v_e: np.ndarray, c_be: np.ndarray, out: np.ndarray) -> None:
+    """NED velocity, Euler angles (rad) and quaternion of C_b^n at each row into out[:, 0:10], through
+    ``C_e^n = C_n^e(lat, lon)^T`` (earth.cne_from_latlon)."""
+    for i in range(lat.shape[0]):
+        c_en = earth.cne_from_latlon(lat[i], lon[i]).T
+        out[i, 0:3] = c_en @ v_e[i]
+        c_bn = c_en @ c_be[i]
+        out[i, 3:6] = dcm_to_euler(c_bn)
+        out[i, 6:10] = dcm_to_quat(c_bn)
+
+
 def _state(m: EarthFixedMotion, t: np.ndarray) -> dict[str, np.ndarray]:
     """Normal, position and its derivatives (ECEF), C_b^e and the IMU rates at times t (s)."""
     w, c0 = m.axes()
@@ -135,7 +156,7 @@ def _state(m: EarthFixedMotion, t: np.ndarray) -> dict[str, np.ndarray]:
     ar, ap = math.radians(m.roll), math.radians(m.pitch)
     roll, droll = ar * np.sin(wr * tau), ar * wr * np.cos(wr * tau)
     pitch, dpitch = ap * np.sin(wp * tau), ap * wp * np.cos(wp * tau)
-    c_bt = np.array([euler_to_dcm(a_, b_, 0.0) for a_, b_ in zip(roll, pitch)])
+    c_bt = _tilt_rows(np.ascontiguousarray(roll), np.ascontiguousarray(pitch))
     c_be = np.einsum("nij,njk->nik", c_te, c_bt)
     w_tb = np.stack([droll, dpitch * np.cos(roll), -dpitch * np.sin(roll)], axis=1)  # ZYX rates, yaw fixed
     om = np.array([0.0, 0.0, earth.OMEGA])
@@ -160,12 +181,11 @@ def truth_rows(m: EarthFixedMotion, t: np.ndarray) -> np.ndarray:
     out = np.zeros((t.shape[0], 19))
     out[:, 0] = t
     out[:, 1], out[:, 2], out[:, 3] = np.degrees(lat), np.degrees(lon), m.h
-    for i in range(t.shape[0]):
-        c_en = earth.cne_from_latlon(lat[i], lon[i]).T
-        out[i, 4:7] = c_en @ st["v_e"][i]
-        c_bn = c_en @ st["c_be"][i]
-        out[i, 7:10] = np.degrees(dcm_to_euler(c_bn))
-        out[i, 10:14] = dcm_to_quat(c_bn)
+    rows = np.empty((t.shape[0], 10))
+    _ned_rows(lat, lon, np.ascontiguousarray(st["v_e"]), np.ascontiguousarray(st["c_be"]), rows)
+    out[:, 4:7] = rows[:, 0:3]
+    out[:, 7:10] = np.degrees(rows[:, 3:6])
+    out[:, 10:14] = rows[:, 6:10]
     out[:, 14:17] = out[:, 7:10]
     return out
 
