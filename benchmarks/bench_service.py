@@ -239,6 +239,26 @@ def percentile(values: np.ndarray, q: float) -> float:
 
 
 # --- the service process -----------------------------------------------------------
+GNSS_HZ = 5.0  # GPS_RAW_INT in the filter-on runs (issue 33: "GNSS at 5 Hz")
+
+
+def gnss_frames(usec: np.ndarray, rate: float, gnss_hz: float, sysid: int = SYSID, compid: int = COMPID
+                ) -> dict[int, bytes]:
+    """GPS_RAW_INT frames (3D fix at the static record's position, at rest) to send straight after the IMU
+    frame of the same time, every ``rate / gnss_hz`` IMU samples: {IMU index: frame}."""
+    from mavins.link.mavlink import mavlink
+
+    mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
+    every = max(1, int(round(rate / gnss_hz)))
+    out = {}
+    for i in range(0, len(usec), every):
+        mav.seq = (i // every) % 256
+        out[i] = mavlink.MAVLink_gps_raw_int_message(
+            int(usec[i]), 3, int(round(LAT * 1e7)), int(round(LON * 1e7)), int(round(ALT * 1000)), 80, 120, 0, 0,
+            12, int(round(ALT * 1000)), 500, 800, 50, 100, 0).pack(mav)
+    return out
+
+
 @dataclass
 class ServiceProc:
     """``mavins run`` in a subprocess; stderr collected; stopped with SIGTERM."""
@@ -336,12 +356,15 @@ def solution_error(row: np.ndarray | None) -> tuple[float, float]:
 
 # --- sender subprocess ---------------------------------------------------------------
 def sender_main(argv: Sequence[str]) -> int:
-    """``--sender PORT RATE SECONDS GX GY GZ AX AY AZ``: build frames, print ready, wait for a line, send."""
+    """``--sender PORT RATE SECONDS GX GY GZ AX AY AZ [GNSS_HZ]``: build frames, print ready, wait for a
+    line, send (a GPS_RAW_INT after the IMU frame of its time at GNSS_HZ, when given)."""
     port, rate, seconds = int(argv[0]), float(argv[1]), float(argv[2])
     gyro = [float(x) for x in argv[3:6]]
     accel = [float(x) for x in argv[6:9]]
+    gnss_hz = float(argv[9]) if len(argv) > 9 else 0.0
     n = int(round(rate * seconds))
-    frames, _ = highres_frames(n, rate, gyro, accel)
+    frames, usec = highres_frames(n, rate, gyro, accel)
+    gnss = gnss_frames(usec, rate, gnss_hz) if gnss_hz > 0 else {}
     flen = frames.shape[1]
     mv = memoryview(frames.tobytes())
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -364,6 +387,8 @@ def sender_main(argv: Sequence[str]) -> int:
         while i < due:
             try:
                 sendto(mv[i * flen : (i + 1) * flen], addr)
+                if i in gnss:
+                    sendto(gnss[i], addr)
             except OSError:
                 errors += 1
             i += 1
@@ -578,8 +603,9 @@ print(n, flush=True)
 """
 
 
-def latency_run(port: int, seconds: float, warm_s: float, rate: float = 1000.0) -> dict:
+def latency_run(port: int, seconds: float, warm_s: float, rate: float = 1000.0, gnss_hz: float = 0.0) -> dict:
     """Send 1 kHz HIGHRES_IMU to ``port`` from one socket; match ATTITUDE replies by time_boot_ms.
+    With ``gnss_hz``, a GPS_RAW_INT follows the IMU frame of its time at that rate.
 
     Returns per-sample latencies (ms): client-side (perf_counter before sendto
     to reading the reply) and kernel (time_ns before sendto to the reply's
@@ -588,6 +614,7 @@ def latency_run(port: int, seconds: float, warm_s: float, rate: float = 1000.0) 
     gyro, accel = static_imu()
     n = int(round(rate * (warm_s + seconds)))
     frames, usec = highres_frames(n, rate, gyro, accel)
+    gnss = gnss_frames(usec, rate, gnss_hz) if gnss_hz > 0 else {}
     flen = frames.shape[1]
     mv = memoryview(frames.tobytes())
     ms_of = (usec // 1000).astype(np.int64)
@@ -646,6 +673,8 @@ def latency_run(port: int, seconds: float, warm_s: float, rate: float = 1000.0) 
         send_wall[i] = wall_ns()
         send_perf[i] = perf_ns()
         sock.sendto(mv[i * flen : (i + 1) * flen], addr)
+        if i in gnss:
+            sock.sendto(gnss[i], addr)
         drain()
     end = perf_ns() + 500_000_000
     while perf_ns() < end:
@@ -662,16 +691,22 @@ def latency_run(port: int, seconds: float, warm_s: float, rate: float = 1000.0) 
             "other": dict(other)}
 
 
-def latency_service(seconds: float) -> dict:
+def latency_service(seconds: float, gnss_hz: float = 0.0) -> dict:
+    """Latency of ``mavins run --rate 1000 --samples 1`` (filter on: GNSS at ``gnss_hz``, when > 0); the
+    service's exit counters in ``counters``."""
     port = free_udp_port()
     svc = ServiceProc(port, ["--rate", "1000", "--samples", "1"], max_duration=seconds + 60)
     svc.start()
     try:
-        res = latency_run(port, seconds, warm_s=ALIGN_S + 1.0)
+        cpu0, w0 = proc_cpu_seconds(svc.pid), time.monotonic()
+        res = latency_run(port, seconds, warm_s=ALIGN_S + 1.0, gnss_hz=gnss_hz)
         cpu = proc_cpu_seconds(svc.pid)
+        res["cpu_pct"] = 100.0 * (cpu - cpu0) / (time.monotonic() - w0)
     finally:
-        svc.stop()
+        res_counters = svc.stop()
     res["service_cpu_s"] = cpu
+    res["counters"] = res_counters
+    res["lines"] = list(svc.lines)
     return res
 
 
@@ -727,15 +762,17 @@ def cpu_bare(seconds: float, rate: float = 1000.0) -> tuple[float, float]:
     return 100.0 * (u1 + s1 - u0 - s0) / (w1 - w0), 100.0 * (s1 - s0) / (w1 - w0)
 
 
-def cpu_run(seconds: float, rerun: Path | None, rate: float = 1000.0, out_rate: float = 50.0) -> dict:
-    """Service CPU % of one core over a steady window at ``rate`` input, ``out_rate`` Hz output."""
+def cpu_run(seconds: float, rerun: Path | None, rate: float = 1000.0, out_rate: float = 50.0,
+            gnss_hz: float = 0.0) -> dict:
+    """Service CPU % of one core over a steady window at ``rate`` input, ``out_rate`` Hz output (GPS_RAW_INT
+    at ``gnss_hz`` too, when > 0: the filter on)."""
     gyro, accel = static_imu()
     port = free_udp_port()
     settle = ALIGN_S + 2.0
     total = settle + seconds + 1.0
     sender = subprocess.Popen(
         [sys.executable, str(Path(__file__).resolve()), "--sender", str(port), repr(rate), repr(total),
-         *map(repr, gyro), *map(repr, accel)],
+         *map(repr, gyro), *map(repr, accel), repr(gnss_hz)],
         stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=ROOT)
     args = ["--rate", f"{out_rate:g}"] + (["--rerun", str(rerun)] if rerun is not None else [])
     svc = ServiceProc(port, args, max_duration=total + 60)
@@ -764,7 +801,7 @@ def cpu_run(seconds: float, rerun: Path | None, rate: float = 1000.0, out_rate: 
         svc.stop()
     return {"cpu_pct": 100.0 * (c1 - c0) / (w1 - w0), "window_s": w1 - w0, "rss0": rss0, "rss1": rss1,
             "sys_pct": 100.0 * (s1 - s0) / (w1 - w0),
-            "sent": stats["sent"], "accepted": c.get("imu_accepted", 0),
+            "sent": stats["sent"], "accepted": c.get("imu_accepted", 0), "gnss": c.get("gnss_pos_accepted", 0),
             "sender_cpu_pct": 100.0 * stats["cpu_s"] / stats["seconds"],
             "rrd_mb": rerun.stat().st_size / 1e6 if rerun is not None and rerun.exists() else None}
 
@@ -1483,6 +1520,22 @@ def main(argv: Sequence[str] = ()) -> list[dict]:
             rows.append(_row("latency IMU in -> ATTITUDE out, max", samples=len(lat["client_ms"]),
                              value=f"{float(np.max(lat['client_ms'])) if len(lat['client_ms']) else float('nan'):.3f} ms",
                              note=f"echo max {float(np.max(echo['client_ms'])):.3f} ms"))
+            log(f"latency with the filter on: GPS_RAW_INT at {GNSS_HZ:g} Hz too, {args.latency_seconds:g} s")
+            flt = latency_service(args.latency_seconds, gnss_hz=GNSS_HZ)
+            fixes = flt["counters"].get("gnss_pos_accepted", 0)
+            for q, eq in ((50, e50), (99, e99)):
+                v = percentile(flt["client_ms"], q)
+                goal = f"p99 <= 1 ms: {_verdict(v <= GOAL_LATENCY_P99_MS)}" if q == 99 else None
+                rows.append(_row(f"latency, filter on (GNSS {GNSS_HZ:g} Hz), p{q}", samples=len(flt["client_ms"]),
+                                 value=f"{v:.3f} ms", ratio=v / eq if eq > 0 else None,
+                                 baseline=f"Python UDP echo p{q} {eq:.3f} ms", goal=goal,
+                                 note=f"kernel stamps: {percentile(flt['kernel_ms'], q):.3f} ms; {fixes} fixes fused"))
+            rows.append(_row(f"latency, filter on (GNSS {GNSS_HZ:g} Hz), max", samples=len(flt["client_ms"]),
+                             value=f"{float(np.max(flt['client_ms'])) if len(flt['client_ms']) else float('nan'):.3f} ms",
+                             note=f"p99.9 {percentile(flt['client_ms'], 99.9):.3f} ms"))
+            rows.append(_row("CPU at 1 kHz in, 1 kHz out, filter on", value=f"{flt['cpu_pct']:.1f} % of a core",
+                             goal=f"<= 25 %: {_verdict(flt['cpu_pct'] <= 25.0)}",
+                             note="over the latency run (one output set per sample)"))
             missing = lat["expected"] - lat["matched"]
             NOTES.append(f"latency: {lat['matched']:,} of {lat['expected']:,} samples after alignment got their "
                          f"ATTITUDE ({missing} missing); p99.9 {percentile(lat['client_ms'], 99.9):.3f} ms; "
@@ -1507,6 +1560,14 @@ def main(argv: Sequence[str] = ()) -> list[dict]:
                              ratio=without["cpu_pct"] / bare if bare > 0 else None, baseline=base,
                              note=f"kernel {without['sys_pct']:.1f} %, RSS {without['rss1']:.0f} MB, "
                                   f"loss {without['sent'] - without['accepted']}"))
+            log(f"CPU at 1 kHz, 50 Hz output, filter on (GNSS {GNSS_HZ:g} Hz), without Rerun")
+            gn = cpu_run(args.cpu_seconds, None, gnss_hz=GNSS_HZ)
+            rows.append(_row(f"CPU at 1 kHz in, 50 Hz out, filter on (GNSS {GNSS_HZ:g} Hz)", seconds=gn["window_s"],
+                             value=f"{gn['cpu_pct']:.1f} % of a core",
+                             ratio=gn["cpu_pct"] / bare if bare > 0 else None, baseline=base,
+                             goal=f"<= 10 %: {_verdict(gn['cpu_pct'] <= GOAL_CPU_PCT)}",
+                             note=f"kernel {gn['sys_pct']:.1f} %, {gn['gnss']} fixes fused, "
+                                  f"loss {gn['sent'] - gn['accepted']}"))
             log("CPU at 1 kHz, 1 Hz output, without Rerun (what the output sets cost)")
             quiet = cpu_run(args.cpu_seconds, None, out_rate=1.0)
             rows.append(_row("CPU at 1 kHz in, 1 Hz out, no Rerun", seconds=quiet["window_s"],

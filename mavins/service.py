@@ -411,6 +411,7 @@ class Service:
         c.update(self.pipeline.counters)
         c.update({f"rejected_{k}": v for k, v in self.pipeline.ingest.rejected.items()})
         c.update(self.pipeline.engine.counters)
+        c.update(self.pipeline.engine.filter.counters)  # measurements accepted and rejected, by kind
         c["imu_accepted"] = self.pipeline.ingest.accepted
         self.summary.counters = c
         self.summary.state = self.pipeline.engine.state.value
