@@ -87,7 +87,7 @@ def run_nav(imu_path: Path, init_path: Path, out_path: Path, opts: NavOptions) -
                         out = np.empty((piece.shape[0] // opts.strapdown.samples + 1, sd.OUT_SIZE))
                         m = run(state, cfg, np.ascontiguousarray(piece[:, 0]), np.ascontiguousarray(piece[:, 1:4]),
                                 np.ascontiguousarray(piece[:, 4:7]), out)
-                        sol = to_file_units(out[:m])
+                        sol = to_file_units(out[:m], copy=False)
                         t2 = time.perf_counter()
                         t_compute += t2 - t1
                         if writing is not None:

@@ -94,7 +94,7 @@ def run_nav_fdi(imu_paths: Sequence[Path], init_path: Path, out_path: Path, fdi_
     state = initial_state(init.to_dict())
     out = np.empty((t.shape[0] // int(strapdown.get("samples", 2)) + 1, sd.OUT_SIZE))
     m = run(state, cfg, t, np.ascontiguousarray(g), np.ascontiguousarray(a), out)
-    sol = to_file_units(out[:m])
+    sol = to_file_units(out[:m], copy=False)
     with files.atomic_outputs([out_path, fdi_path]) as (tmp_out, tmp_fdi):
         files.write_table(tmp_out, files.SOLUTION_COLUMNS, sol)
         if tmp_fdi is not None:

@@ -37,10 +37,12 @@ def rest_state() -> np.ndarray:
     return initial_state(REST)
 
 
-def to_file_units(rows: np.ndarray) -> np.ndarray:
-    """Kernel solution rows (radians) to file units (degrees for lat, lon, Euler)."""
-    out = rows.copy()
-    out[:, [1, 2, 7, 8, 9]] = np.degrees(out[:, [1, 2, 7, 8, 9]])
+def to_file_units(rows: np.ndarray, copy: bool = True) -> np.ndarray:
+    """Kernel solution rows (radians) to file units (degrees for lat, lon, Euler); ``copy=False``
+    converts ``rows`` in place (a buffer of the caller's own), column by column."""
+    out = rows.copy() if copy else rows
+    for c in (1, 2, 7, 8, 9):
+        np.degrees(out[:, c], out=out[:, c])
     return out
 
 
@@ -74,4 +76,4 @@ def navigate(
         m = sd.run_rates(state, cfg, t, gyro, accel, out)
     else:
         raise ValueError(f"data must be increments or rates, got {data!r}")
-    return to_file_units(out[:m])
+    return to_file_units(out[:m], copy=False)
