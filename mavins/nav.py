@@ -68,8 +68,11 @@ def run_nav(imu_path: Path, init_path: Path, out_path: Path, opts: NavOptions) -
     rows = 0
     # the pool is left first: it waits for the writer before atomic_output renames or removes the file
     with files.atomic_output(out_path) as tmp, ThreadPoolExecutor(2, thread_name_prefix="mavins-nav") as pool:
-        loading = pool.submit(run, state.copy(), cfg, np.empty(0), np.empty((0, 3)), np.empty((0, 3)),
-                              np.empty((1, sd.OUT_SIZE)))  # no rows: only loads (or compiles) the kernel
+        none = np.empty((0, 7))  # no rows, as views of a table: only loads (or compiles) the kernel run calls
+        loading = pool.submit(run, state.copy(), cfg, none[:, 0], none[:, 1:4], none[:, 4:7], np.empty((1, sd.OUT_SIZE)))
+        # two solution buffers, taken in turn: the writer formats one while the kernel fills the other
+        buffers = [np.empty((PIECE_ROWS // opts.strapdown.samples + 1, sd.OUT_SIZE)) for _ in range(2)]
+        pieces = 0
         writing: Future | None = None
         t0 = time.perf_counter()
         try:
@@ -84,9 +87,9 @@ def run_nav(imu_path: Path, init_path: Path, out_path: Path, opts: NavOptions) -
                     loading.result()
                     for a in range(0, table.shape[0], PIECE_ROWS):
                         piece = table[a:a + PIECE_ROWS]
-                        out = np.empty((piece.shape[0] // opts.strapdown.samples + 1, sd.OUT_SIZE))
-                        m = run(state, cfg, np.ascontiguousarray(piece[:, 0]), np.ascontiguousarray(piece[:, 1:4]),
-                                np.ascontiguousarray(piece[:, 4:7]), out)
+                        out = buffers[pieces % 2]  # not the one the writer may still hold
+                        pieces += 1
+                        m = run(state, cfg, piece[:, 0], piece[:, 1:4], piece[:, 4:7], out)  # views: no copies
                         sol = to_file_units(out[:m], copy=False)
                         t2 = time.perf_counter()
                         t_compute += t2 - t1
@@ -367,8 +370,9 @@ def _warm(opts: NavOptions) -> None:
 
     cfg = sd.make_config(**opts.strapdown.keywords())
     run = sd.run_increments if opts.input == "increments" else sd.run_rates
-    t = np.array([0.01, 0.02])
-    run(rest_state(), cfg, t, np.zeros((2, 3)), np.zeros((2, 3)), np.empty((3, sd.OUT_SIZE)))
+    table = np.zeros((2, 7))  # views of a table, as run_nav passes them
+    table[:, 0] = (0.01, 0.02)
+    run(rest_state(), cfg, table[:, 0], table[:, 1:4], table[:, 4:7], np.empty((3, sd.OUT_SIZE)))
 
 
 def run_nav_batch(imu_paths: list[Path], init_path: Path | None, out_dir: Path, opts: NavOptions,

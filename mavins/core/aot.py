@@ -42,11 +42,12 @@ class Export:
     name: str
     signature: str
     frame: int | None = None
+    variant: str = ""  # names a second signature of the same kernel (and frame)
 
     @property
     def symbol(self) -> str:
         """The name of the built function in the extension module."""
-        tail = "" if self.frame is None else f"_frame{self.frame}"
+        tail = ("" if self.frame is None else f"_frame{self.frame}") + (f"_{self.variant}" if self.variant else "")
         return f"{self.module}__{self.name}{tail}"
 
 

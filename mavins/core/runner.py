@@ -11,6 +11,7 @@ from typing import Mapping
 import numpy as np
 
 from . import strapdown as sd
+from .jit import kernel
 
 
 def initial_state(init: Mapping[str, float]) -> np.ndarray:
@@ -39,11 +40,23 @@ def rest_state() -> np.ndarray:
 
 def to_file_units(rows: np.ndarray, copy: bool = True) -> np.ndarray:
     """Kernel solution rows (radians) to file units (degrees for lat, lon, Euler); ``copy=False``
-    converts ``rows`` in place (a buffer of the caller's own), column by column."""
+    converts ``rows`` in place (a buffer of the caller's own)."""
     out = rows.copy() if copy else rows
-    for c in (1, 2, 7, 8, 9):
-        np.degrees(out[:, c], out=out[:, c])
+    if out.shape[0]:
+        degrees_in_place(out, DEGREE_COLUMNS)
     return out
+
+
+DEGREE_COLUMNS = np.array([1, 2, 7, 8, 9])  # lat, lon, roll, pitch, yaw of a solution row
+RAD_TO_DEG = 180.0 / np.pi  # as numpy's degrees()
+
+
+@kernel
+def degrees_in_place(rows: np.ndarray, columns: np.ndarray) -> None:
+    """``rows[:, c] *= 180/pi`` for each c in ``columns``, one pass over the rows."""
+    for i in range(rows.shape[0]):
+        for c in columns:
+            rows[i, c] = rows[i, c] * RAD_TO_DEG
 
 
 def navigate(
