@@ -235,8 +235,12 @@ class LiveFilter:
         if kind == "gnss":
             lat, lon, h, vel, sig_h, sig_v, sig_vel = args
             lat0, lon0, _ = position(s, cfg)
-            ok = self._update(s, cfg, "gnss_pos", ("pos", "hgt"),
-                              kalman.gnss_position(s, cfg, lat, lon, h, self.lever, late, sig_h, sig_v))
+            v_m = np.full(3, math.nan) if vel is None else np.asarray(vel, dtype=float)
+            ps, _, _, pratio, vs, _, _, vratio = aided.apply_gnss(
+                s, cfg, self.bias, self.P, lat, lon, h, v_m, np.array(self._w_ib), self.lever, late, self._T_k,
+                sig_h, sig_v, sig_vel, self.settings.gate, self.free)
+            ok = ps == aided.ACCEPTED
+            self._count("gnss_pos", ("pos", "hgt"), ok, pratio)
             if ok:
                 lat1, lon1, _ = position(s, cfg)
                 if math.hypot(*north_east_error(lat1, lon1, lat0, lon0)) > JUMP_M:
@@ -247,14 +251,10 @@ class LiveFilter:
                 self.gnss_seen = True
                 self.last_pos_t = self.last_hgt_t = t_m
             self.glitch = not ok
-            if vel is not None and not ok:  # a fix whose position failed the gate is a glitch: its velocity too
+            if vs == aided.GLITCH:  # a fix whose position failed the gate is a glitch: its velocity too
                 self.counters["gnss_vel_rejected"] += 1
-            elif vel is not None:
-                v = np.asarray(vel, dtype=float)
-                model = kalman.gnss_velocity(s, v, np.array(self._w_ib), self.lever, late, self._T_k, sig_vel)
-                if not math.isfinite(v[2]):  # ground speed and course (GPS_RAW_INT): the horizontal rows
-                    model = kalman.horizontal_rows(*model)
-                self._update(s, cfg, "gnss_vel", ("vel",), model)
+            elif vs != aided.ABSENT:
+                self._count("gnss_vel", ("vel",), vs == aided.ACCEPTED, vratio)
         elif kind == "baro":
             h, sigma = args
             if self._update(s, cfg, "baro", ("hgt",), kalman.baro_height(s, self.bias, h, late, sigma)):
@@ -287,11 +287,15 @@ class LiveFilter:
         """Apply one measurement model (nu, H, R) with the gate, count it, keep its test ratio."""
         nu, H, R = model
         _, ratio, ok = kalman.apply_update(s, cfg, self.bias, self.P, H, nu, R, self.settings.gate, self.free)
-        self._kept = self._kept or bool(ok)
+        self._count(kind, ratio_keys, bool(ok), ratio)
+        return bool(ok)
+
+    def _count(self, kind: str, ratio_keys: tuple[str, ...], ok: bool, ratio: float) -> None:
+        """Count an applied update of ``kind`` and keep its test ratio (squared) under ``ratio_keys``."""
+        self._kept = self._kept or ok
         self.counters[f"{kind}_{'accepted' if ok else 'rejected'}"] += 1
         for key in ratio_keys:
             self.ratios[key] = ratio * ratio
-        return bool(ok)
 
     def tick(self, t: float) -> None:
         """Bookkeeping at an output: GNSS loss after GNSS_LOST_S without an accepted fix."""

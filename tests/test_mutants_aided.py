@@ -598,16 +598,27 @@ def test_late_measurements_are_taken_back_along_the_velocity() -> None:
 
 
 def test_partial_rows_are_not_used() -> None:
-    """A GNSS position needs lat, lon and h; a velocity vn, ve and vd; a baro row its height; a magnetometer row
+    """A GNSS position needs lat, lon and h; a velocity vn and ve; a baro row its height; a magnetometer row
     all three components. Rows with any of them NaN are not used (nothing counted)."""
     lat, lon = math.radians(LAT0), math.radians(LON0)
     gnss = [[0.02, NAN, lon, H0, NAN, 0.0, 0.0, 1.0, 1.0, 1.0], [0.03, lat, NAN, H0, 0.0, NAN, 0.0, 1.0, 1.0, 1.0],
-            [0.04, lat, lon, NAN, 0.0, 0.0, NAN, 1.0, 1.0, 1.0]]
+            [0.04, lat, lon, NAN, NAN, NAN, 0.0, 1.0, 1.0, 1.0]]
     baro = [[0.02, NAN, 1.0]]
     mag = [[0.02, NAN, 1.0, 1.0, 0.1], [0.03, 1.0, NAN, 1.0, 0.1], [0.04, 1.0, 0.0, NAN, 0.1]]
     P = np.diag([0.01] * 3 + [1.0] * 6 + [0.0] * 12 + [1.0] + [0.0] * 9)
     _, _, _, out, c, log = run_direct(imu(), P=P, gnss=gnss, baro=baro, mag=mag)
     assert c.sum() == 0 and len(log) == 0
+
+
+def test_a_velocity_without_its_down_component_gives_the_horizontal_rows() -> None:
+    """GPS_RAW_INT's ground speed and course carry no vertical velocity: a GNSS row with vn, ve and an empty vd
+    is fused as the two horizontal rows (dof 2), in the batch as the live path does (aided.apply_gnss); at
+    rest with P_vel = 1 and sigma_vel 1 its NIS is 0 (zero innovation)."""
+    gnss = [[0.02, NAN, NAN, NAN, 0.0, 0.0, NAN, 1.0, 1.0, 1.0]]
+    P = np.diag([0.01] * 3 + [1.0] * 6 + [0.0] * 12 + [1.0] + [0.0] * 9)
+    _, _, _, _, c, log = run_direct(imu(), P=P, gnss=gnss)
+    assert c[aided.K_GNSS_VEL, 0] == 1 and c.sum() == 1
+    assert log[0, 1] == aided.K_GNSS_VEL and log[0, 3] == 2 and log[0, 2] < 1e-12
 
 
 def test_a_late_magnetometer_sample_is_carried_to_the_update() -> None:

@@ -27,9 +27,11 @@ are skipped):
 
 * GNSS ``t, lat, lon (rad), h (m), vn, ve, vd (m/s), sigma_h, sigma_v (m),
   sigma_vel (m/s)``: position used when lat, lon, h are finite, velocity
-  when vn, ve, vd are, unless the row's position failed the gate (a glitch:
+  when vn, ve are (vd empty: the horizontal rows only, as GPS_RAW_INT's speed
+  and course give), unless the row's position failed the gate (a glitch:
   its velocity is counted rejected, not logged; the live path does the same
-  and drops the fix's dual-antenna heading too);
+  and drops the fix's dual-antenna heading too); one kernel for both paths,
+  :func:`apply_gnss`;
 * baro ``t, h (m), sigma (m)``: h is barometric height with an unknown
   offset the filter estimates (state X_BARO);
 * mag ``t, mx, my, mz (body FRD, any unit), sigma (rad)``: heading through
@@ -241,6 +243,41 @@ def _record(
     return n_log
 
 
+# Status of one part of a measurement (apply_gnss, apply_mag): accepted, rejected by the gate, no value in the
+# row, or left out because the fix's position failed the gate (a glitch).
+ACCEPTED, REJECTED, ABSENT, GLITCH = 1, 0, -1, 2
+
+
+@kernel
+def apply_gnss(s: np.ndarray, cfg: np.ndarray, bias: np.ndarray, P: np.ndarray, lat: float, lon: float, h: float,
+               v_m: np.ndarray, w_ib: np.ndarray, lever: np.ndarray, late: float, T: float, sig_h: float,
+               sig_v: float, sig_vel: float, gate: float, free: np.ndarray
+               ) -> tuple[int, int, float, float, int, int, float, float]:
+    """One GNSS fix taken ``late`` s before the solution, for the batch and the live path alike: the
+    position (lat, lon rad, ellipsoidal h m; when all are finite; kalman.gnss_position), then the NED
+    velocity ``v_m`` (m/s; when north and east are finite; kalman.gnss_velocity over the attitude interval
+    T with the body rate w_ib; only its horizontal rows when the down component is NaN, as GPS_RAW_INT's
+    ground speed and course give: kalman.horizontal_rows). A fix whose position fails the gate is a glitch:
+    its velocity is left out too (status GLITCH). Returns, for the position then the velocity,
+    ``(status, rows, nis, ratio)``: status ACCEPTED, REJECTED, ABSENT or GLITCH."""
+    ps, pr, pnis, pratio = ABSENT, 0, 0.0, 0.0
+    if np.isfinite(lat) and np.isfinite(lon) and np.isfinite(h):
+        nu, H, R = kf.gnss_position(s, cfg, lat, lon, h, lever, late, sig_h, sig_v)
+        pnis, pratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate, free)
+        ps, pr = (ACCEPTED if ok else REJECTED), nu.shape[0]
+    vs, vr, vnis, vratio = ABSENT, 0, 0.0, 0.0
+    if np.isfinite(v_m[0]) and np.isfinite(v_m[1]):
+        if ps == REJECTED:
+            vs = GLITCH
+        else:
+            nu, H, R = kf.gnss_velocity(s, v_m, w_ib, lever, late, T, sig_vel)
+            if not np.isfinite(v_m[2]):
+                nu, H, R = kf.horizontal_rows(nu, H, R)
+            vnis, vratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate, free)
+            vs, vr = (ACCEPTED if ok else REJECTED), nu.shape[0]
+    return ps, pr, pnis, pratio, vs, vr, vnis, vratio
+
+
 @kernel
 def apply_mag(s: np.ndarray, cfg: np.ndarray, bias: np.ndarray, P: np.ndarray, incl: np.ndarray, m_b: np.ndarray,
               w_ib: np.ndarray, late: float, declination: float, sigma: float, incl_model: float,
@@ -422,23 +459,17 @@ def run_aided(
             P0, acc0, kept = P.copy(), acc.copy(), False
             _propagate(s, cfg, spec, P, acc, GEOGRAPHIC)
             row = gnss[ig]
-            late = tk - row[0]
-            glitch = False
-            if np.isfinite(row[1]) and np.isfinite(row[2]) and np.isfinite(row[3]):
-                nu, H, R = kf.gnss_position(s, cfg, row[1], row[2], row[3], lever, late, row[7], row[8])
-                nis, ratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate, kf.ALL)
-                n_log = _record(log, n_log, counts, row[0], K_GNSS_POS, nu.shape[0], nis, ratio, ok)
-                kept = kept or ok
-                glitch = not ok
-            has_vel = np.isfinite(row[4]) and np.isfinite(row[5]) and np.isfinite(row[6])
-            if has_vel and glitch:  # a fix whose position failed the gate is a glitch: its velocity too
+            v_m[0], v_m[1], v_m[2] = row[4], row[5], row[6]
+            ps, pr, pnis, pratio, vs, vr, vnis, vratio = apply_gnss(
+                s, cfg, bias, P, row[1], row[2], row[3], v_m, w_ib, lever, tk - row[0], T, row[7], row[8], row[9],
+                gate, kf.ALL)
+            if ps != ABSENT:
+                n_log = _record(log, n_log, counts, row[0], K_GNSS_POS, pr, pnis, pratio, ps == ACCEPTED)
+            if vs == GLITCH:  # a fix whose position failed the gate is a glitch: its velocity too
                 counts[K_GNSS_VEL, 1] += 1
-            elif has_vel:
-                v_m[0], v_m[1], v_m[2] = row[4], row[5], row[6]
-                nu, H, R = kf.gnss_velocity(s, v_m, w_ib, lever, late, T, row[9])
-                nis, ratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate, kf.ALL)
-                n_log = _record(log, n_log, counts, row[0], K_GNSS_VEL, nu.shape[0], nis, ratio, ok)
-                kept = kept or ok
+            elif vs != ABSENT:
+                n_log = _record(log, n_log, counts, row[0], K_GNSS_VEL, vr, vnis, vratio, vs == ACCEPTED)
+            kept = ps == ACCEPTED or vs == ACCEPTED
             keep_or_undo(kept, P, acc, P0, acc0)
             ig += 1
         while ib < baro.shape[0] and baro[ib, 0] <= tk:

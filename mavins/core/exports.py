@@ -37,6 +37,8 @@ EXPORTS = (
     Export("kalman", "gnss_velocity", f"{MEASUREMENT}({V}, {V}, {V}, {V}, f8, f8, f8)"),
     Export("kalman", "horizontal_rows", f"{MEASUREMENT}({V}, {M}, {M})"),
     Export("kalman", "baro_height", f"{MEASUREMENT}({V}, {V}, f8, f8, f8)"),
+    Export("aided", "apply_gnss", f"Tuple((i8, i8, f8, f8, i8, i8, f8, f8))({V}, {V}, {V}, {M}, f8, f8, f8, {V}, {V}, "
+                                  f"{V}, f8, f8, f8, f8, f8, f8, {V})"),
     Export("aided", "keep_or_undo", f"none(b1, {M}, {V}, {M}, {V})"),
     Export("aided", "apply_mag", f"Tuple((i8, f8, f8))({V}, {V}, {V}, {M}, {V}, {V}, {V}, f8, f8, f8, f8, f8, f8, f8, {V})"),
     Export("kalman", "zupt", f"{MEASUREMENT}({V}, f8)"),
