@@ -47,10 +47,10 @@ class FilterSettings:
     sigma_level: float = 1.0  # deg
     sigma_yaw: float = 10.0  # deg
     sigma_baro_offset: float = 50.0  # m
-    sigma_mag: float = 3.0  # deg of heading
+    sigma_mag: float = math.degrees(aided.DEFAULT_SIGMA_MAG)  # deg of heading (the batch filter's default)
     scale_factors: bool = False  # estimate the gyro and accelerometer scale factors (errmodel.spec_of)
     sigma_mag_bias: float = 0.0  # gauss per axis: initial 1-sigma of the hard iron (0: taken as calibrated, not estimated)
-    sigma_zupt: float = 0.02  # m/s
+    sigma_zupt: float = aided.DEFAULT_SIGMA_ZUPT  # m/s (the batch filter's default)
     predict_dt: float = 0.01  # s: the covariance is propagated at about this interval
     delays: dict[str, float] = field(default_factory=dict)  # s by kind (gnss, baro, mag): measured this long before its stamp
 

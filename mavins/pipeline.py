@@ -32,10 +32,11 @@ RESTART_JUMP = 1.0  # s: sensor time going back further than this is an autopilo
 CLOCK_MATCH_S = 2.0  # s: an aiding message stamped this close to the IMU time is on the IMU's clock
 GNSS_MESSAGES = ("GPS_RAW_INT", "GPS2_RAW", "GPS_INPUT", "HIL_GPS")
 MS_WRAP_S = 2**32 * 1e-3  # s: a uint32 millisecond field (time_boot_ms) wraps after this (49.7 days)
-GNSS_SIGMA_H = 2.5  # m: horizontal 1-sigma when a fix gives no accuracy (docs/conventions.md GNSS default)
-GNSS_SIGMA_V = 5.0  # m
-GNSS_SIGMA_VEL = 0.3  # m/s
-BARO_SIGMA_M = 0.5  # m: barometric height 1-sigma (docs/conventions.md baro default)
+# 1-sigma of a fix that gives no accuracy, and of the barometer: the filter's defaults, declared in core.aided
+GNSS_SIGMA_H = aided.DEFAULT_SIGMA_H  # m
+GNSS_SIGMA_V = aided.DEFAULT_SIGMA_V  # m
+GNSS_SIGMA_VEL = aided.DEFAULT_SIGMA_VEL  # m/s
+BARO_SIGMA_M = aided.DEFAULT_SIGMA_BARO  # m
 GNSS_MAX_SIGMA = 50.0  # m: a fix claiming a worse 1-sigma accuracy is rejected (docs/filter.md)
 GNSS_HEIGHT_RANGE = (-1000.0, 50000.0)  # m, ellipsoidal: below the Dead Sea's shore, above stratospheric balloons
 GNSS_MAX_SPEED = 600.0  # m/s horizontal: above the receivers' export limit (1,000 knots, 514 m/s)
