@@ -32,6 +32,12 @@ GNSS_HEADING = "GNSS yaw"  # heading source: a dual-antenna receiver's heading (
 GNSS_YAW_PENDING = "GNSS velocity (pending)"  # heading source: none yet, found from GNSS velocity once moving
 
 
+def _column(first: str) -> slice:
+    """The three columns of aided.OUT_COLUMNS from ``first`` on (x, y, z or north, east, down)."""
+    i = aided.OUT_COLUMNS.index(first)
+    return slice(i, i + 3)
+
+
 @dataclass
 class FilterSettings:
     """How the live filter is set up (docs/filter.md)."""
@@ -114,24 +120,18 @@ class LiveFilter:
         self.P = kalman.initial_covariance(self.spec, sigma_pos or st.sigma_pos, st.sigma_vel,
                                            math.radians(self.level_sigma_deg()), sigma_yaw, st.sigma_baro_offset,
                                            st.sigma_mag_bias)
-        if bias_window_s > 0.0:
-            # the window mean's white-noise part ARW / sqrt(T), and the Earth rate misattributed
-            # through the heading error (Omega sigma_yaw); the Gauss-Markov part keeps its own state
-            var = self.spec[errmodel.SP_GYRO_ARW] ** 2 / bias_window_s + (earth.OMEGA * sigma_yaw) ** 2
-            for i in range(3):
-                j = errmodel.X_BG + i
-                self.P[j, :] = 0.0
-                self.P[:, j] = 0.0
-                self.P[j, j] = var
+        # a rest window: the window mean's white-noise part ARW / sqrt(T), and the Earth rate misattributed
+        # through the heading error (Omega sigma_yaw); the Gauss-Markov part keeps its own state
+        var = self.spec[errmodel.SP_GYRO_ARW] ** 2 / bias_window_s + (earth.OMEGA * sigma_yaw) ** 2 \
+            if bias_window_s > 0.0 else 0.0
         self.bias[:] = 0.0
-        self.bias[kalman.B_BG:kalman.B_BG + 3] = gyro_bias
+        kalman.calibrated_gyro_bias(self.P, self.bias, np.asarray(gyro_bias, dtype=float), var)
         self.acc[:] = 0.0
         self.sums[:] = 0.0
         self.sums[6] = sd.state_time(s)
         self._t_prev_k = sd.state_time(s)
         self._T_k = 0.0
-        self._incl[:] = 0.0
-        self._incl[4] = self.P[errmodel.X_MB, errmodel.X_MB]  # the hard iron's reset (aided.apply_mag)
+        self._incl = aided.mag_stats(self.P)  # running sums of aided.apply_mag
         samples = int(cfg[sd.CFG_SAMPLES])
         self.predict_every = max(1, int(round(st.predict_dt / max(dt_sample * samples, 1e-6))))
         self._bind(sd.kernel_frame(cfg))
@@ -185,7 +185,7 @@ class LiveFilter:
     @property
     def gyro_bias(self) -> np.ndarray:
         """Gyro bias estimate (rad/s, body): constant plus Gauss-Markov part."""
-        return self.bias[kalman.B_BG:kalman.B_BG + 3] + self.bias[kalman.B_GG:kalman.B_GG + 3]
+        return kalman.gyro_bias_total(self.bias)
 
     def body_rate(self, w: tuple) -> tuple[float, float, float]:
         """A raw gyro reading (rad/s, body) corrected by the estimates as floats: the arithmetic of
@@ -197,7 +197,7 @@ class LiveFilter:
     @property
     def accel_bias(self) -> np.ndarray:
         """Accelerometer bias estimate (m/s^2, body)."""
-        return self.bias[kalman.B_BA:kalman.B_BA + 3] + self.bias[kalman.B_GA:kalman.B_GA + 3]
+        return kalman.accel_bias_total(self.bias)
 
     # -- measurements ---------------------------------------------------------------
     def measure(self, s: np.ndarray, cfg: np.ndarray, t_m: float, kind: str, *args: object) -> None:
@@ -316,14 +316,11 @@ class LiveFilter:
 
     def uncertainty(self, t: float, resets: int) -> Uncertainty:
         """1-sigma, test ratios and aiding flags at sensor time t (s)."""
-        d = np.sqrt(np.maximum(np.diag(self.P), 0.0))
-        x = errmodel
-        # the estimate is the sum of the two parts: var(b + g) = P_bb + P_gg + 2 P_bg (as aided.filter_row)
-        g, m = np.arange(x.X_BG, x.X_BG + 3), np.arange(x.X_GG, x.X_GG + 3)
-        sg = np.sqrt(np.maximum(self.P[g, g] + self.P[m, m] + 2.0 * self.P[g, m], 0.0))
+        row = np.zeros(aided.OUT_SIZE)
+        aided.filter_row(self.P, self.bias, row)  # the sigmas as the solution files carry them
         return Uncertainty(
-            sigma_pos=d[x.X_DP:x.X_DP + 3].copy(), sigma_vel=d[x.X_DV:x.X_DV + 3].copy(),
-            sigma_att=d[x.X_PHI:x.X_PHI + 3].copy(), sigma_gyro=sg,
+            sigma_pos=row[_column("sigma_n")], sigma_vel=row[_column("sigma_vn")],
+            sigma_att=row[_column("sigma_att_n")], sigma_gyro=row[_column("sigma_bg_x")],
             vel_ratio=self.ratios.get("vel", math.nan), pos_ratio=self.ratios.get("pos", math.nan),
             hgt_ratio=self.ratios.get("hgt", math.nan), mag_ratio=self.ratios.get("mag", math.nan),
             abs_pos=t - self.last_pos_t <= ABS_TIMEOUT_S, abs_hgt=t - self.last_hgt_t <= ABS_TIMEOUT_S,

@@ -279,6 +279,15 @@ def apply_gnss(s: np.ndarray, cfg: np.ndarray, bias: np.ndarray, P: np.ndarray, 
 
 
 @kernel
+def mag_stats(P: np.ndarray) -> np.ndarray:
+    """apply_mag's running sums at the filter's start (kalman.MAG_STATS): none yet, and the hard iron's
+    initial variance from P (the value its covariance is reset to)."""
+    incl = np.zeros(kf.MAG_STATS)
+    incl[4] = P[em.X_MB, em.X_MB]
+    return incl
+
+
+@kernel
 def apply_mag(s: np.ndarray, cfg: np.ndarray, bias: np.ndarray, P: np.ndarray, incl: np.ndarray, m_b: np.ndarray,
               w_ib: np.ndarray, late: float, declination: float, sigma: float, incl_model: float,
               strength_model: float, strength_gate: float, gate: float, free: np.ndarray) -> tuple[int, float, float]:
@@ -344,11 +353,12 @@ def filter_row(P: np.ndarray, bias: np.ndarray, out: np.ndarray) -> None:
                 out[k + 3 + i] = np.sqrt(max(P[x0 + i, x0 + i], 0.0))
             k += 6
     for i in range(3):
-        out[14 + i] = np.sqrt(P[em.X_DP + i, em.X_DP + i])
-        out[17 + i] = np.sqrt(P[em.X_DV + i, em.X_DV + i])
-        out[20 + i] = np.sqrt(P[em.X_PHI + i, em.X_PHI + i])
-        out[23 + i] = bias[kf.B_BG + i] + bias[kf.B_GG + i]
-        out[26 + i] = bias[kf.B_BA + i] + bias[kf.B_GA + i]
+        out[14 + i] = np.sqrt(max(P[em.X_DP + i, em.X_DP + i], 0.0))
+        out[17 + i] = np.sqrt(max(P[em.X_DV + i, em.X_DV + i], 0.0))
+        out[20 + i] = np.sqrt(max(P[em.X_PHI + i, em.X_PHI + i], 0.0))
+    out[23:26] = kf.gyro_bias_total(bias)
+    out[26:29] = kf.accel_bias_total(bias)
+    for i in range(3):
         g, a = em.X_BG + i, em.X_GG + i
         out[29 + i] = np.sqrt(max(P[g, g] + P[a, a] + 2.0 * P[g, a], 0.0))
         g, a = em.X_BA + i, em.X_GA + i
@@ -428,8 +438,7 @@ def run_aided(
     w_ib = np.zeros(3)
     v_m = np.empty(3)
     m_b = np.empty(3)
-    incl = np.zeros(kf.MAG_STATS)  # running sums over the accepted magnetometer samples (apply_mag)
-    incl[4] = P[em.X_MB, em.X_MB]
+    incl = mag_stats(P)  # running sums over the accepted magnetometer samples (apply_mag)
     n_out = 0
     n_log = 0
     for i in range(t.shape[0]):

@@ -81,6 +81,30 @@ B_SIZE = NX - X_SENSORS
 
 
 @kernel
+def gyro_bias_total(bias: np.ndarray) -> np.ndarray:
+    """The gyro bias estimate (rad/s, body): the constant part plus the Gauss-Markov part."""
+    return bias[B_BG:B_BG + 3] + bias[B_GG:B_GG + 3]
+
+
+@kernel
+def accel_bias_total(bias: np.ndarray) -> np.ndarray:
+    """The accelerometer bias estimate (m/s^2, body): the constant part plus the Gauss-Markov part."""
+    return bias[B_BA:B_BA + 3] + bias[B_GA:B_GA + 3]
+
+
+def calibrated_gyro_bias(P: np.ndarray, bias: np.ndarray, gyro_bias: np.ndarray, var: float) -> None:
+    """A gyro bias measured by a zero-rate calibration (rad/s, body): the constant part's estimate, its
+    variance ``var`` per axis, uncorrelated with the rest of the state (P's rows and columns cleared)."""
+    bias[B_BG:B_BG + 3] = gyro_bias
+    if var > 0.0:
+        for i in range(3):
+            j = X_BG + i
+            P[j, :] = 0.0
+            P[:, j] = 0.0
+            P[j, j] = var
+
+
+@kernel
 def correct_gyro(bias: np.ndarray, axis: int, x: float, dt: float) -> float:
     """A raw gyro reading on ``axis`` corrected by the estimates: ``(x - b dt) / (1 + s)`` with b the
     bias (constant plus Gauss-Markov part, rad/s) and s the scale factor; x an angle increment over dt
