@@ -6,7 +6,7 @@
   inertial, 500 runs (``--runs``).
 * **Speed.** The exact increments are simulated once (timed apart); the
   covariance analysis (12 sources) is timed; then the same 500 Monte Carlo
-  runs with ``--jobs 1`` and ``--jobs 2`` (mavins/parallel.py, forked local
+  runs with ``--jobs 1`` and ``--jobs 2`` (mavins/common/parallel.py, forked local
   pool), whose results must be identical bit for bit; speed-up = time(1) / time(2).
 * **Agreement.** At every minute: the Monte Carlo's sample sigma of the
   horizontal position, sqrt(s_n^2 + s_e^2), divided by the covariance's
@@ -70,7 +70,7 @@ def main(argv: Sequence[str] = ()) -> list[dict[str, Any]]:
 
     from mavins import analysis as an
     from mavins.core import covariance as cov
-    from mavins.parallel import run_jobs
+    from mavins.common.parallel import run_jobs
     from sim.scenarios import load
 
     scenario = load("flight")

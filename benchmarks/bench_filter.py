@@ -21,7 +21,7 @@ the filter's cost per IMU sample):
    which pyins's measurement interface cannot express: its H covers only the
    9 navigation states).
 2. **Cost per IMU sample.** Batch (``navigate_aided``) at 100 Hz and at
-   1 kHz; live: ``mavins.pipeline.Pipeline.handle`` fed MAVLink 2 HIGHRES_IMU
+   1 kHz; live: ``mavins.live.pipeline.Pipeline.handle`` fed MAVLink 2 HIGHRES_IMU
    frames at 1 kHz of sensor time with GPS_RAW_INT at 5 Hz (sim/stream.py,
    which builds them with mavins/link/mavlink.py), the filter on, with and
    without parsing the frames; the same figure as a share of one core at
@@ -36,7 +36,7 @@ the filter's cost per IMU sample):
    attitude against the two-sided 95 % chi-square band for that many runs,
    bias NEES at the end, GNSS NIS, and the RMS of the normalised error of
    every one of the 15 contract states (target below 1.5); the runs go
-   through mavins/parallel.py (``--jobs``).
+   through mavins/common/parallel.py (``--jobs``).
 
 pyins's sensor model: ``EstimationModel(bias_sd, noise, bias_walk)`` per
 triad, a random-constant bias with random walk. The grade's bias is a
@@ -451,9 +451,9 @@ def live_frames(seconds: float) -> tuple[list[bytes], np.ndarray, dict, Any]:
 
 
 def _pipeline(init: dict, aiding: tuple[str, ...]) -> Any:
-    from mavins.livefilter import FilterSettings
-    from mavins.engine import EngineConfig
-    from mavins.pipeline import Pipeline
+    from mavins.live.livefilter import FilterSettings
+    from mavins.live.engine import EngineConfig
+    from mavins.live.pipeline import Pipeline
 
     cfg = EngineConfig(lat=init["lat"], lon=init["lon"], alt=init["h"], heading=float(init["yaw"]), align=1.0,
                        rate=50.0, filter=FilterSettings(spec="consumer", aiding=aiding))
@@ -590,13 +590,13 @@ def cost_notes(b100: dict, b1k: dict, live: dict, service: dict | None) -> tuple
 #: function, found by a part of its name (the JIT's and the install-built module's names differ).
 PROFILE_PARTS = (
     ("decode_one (per frame, as UdpLink.receive)", "mavins/link/decode.py", "decode_one"),
-    ("Pipeline.handle", "mavins/pipeline.py", "handle"),
+    ("Pipeline.handle", "mavins/live/pipeline.py", "handle"),
     ("  Ingest.sample (validation)", "mavins/link/ingest.py", "sample"),
-    ("  Engine.on_imu", "mavins/engine.py", "on_imu"),
-    ("    LiveFilter.push", "mavins/livefilter.py", "push"),
+    ("  Engine.on_imu", "mavins/live/engine.py", "on_imu"),
+    ("    LiveFilter.push", "mavins/live/livefilter.py", "push"),
     ("      aided.push_rate_aided (compiled strapdown + filter)", "~", "push_rate_aided"),
-    ("    LiveFilter._apply (GNSS updates)", "mavins/livefilter.py", "_apply"),
-    ("    LiveFilter.uncertainty (per output)", "mavins/livefilter.py", "uncertainty"),
+    ("    LiveFilter._apply (GNSS updates)", "mavins/live/livefilter.py", "_apply"),
+    ("    LiveFilter.uncertainty (per output)", "mavins/live/livefilter.py", "uncertainty"),
 )
 
 
@@ -738,7 +738,7 @@ def mc_run(seed: int, mag_rate: float = 0.0) -> dict[str, Any]:
 
 
 def monte_carlo(runs: int, jobs: int, mag_rate: float = 0.0) -> dict[str, Any]:
-    """Part 3 through mavins.parallel.run_jobs (sequential when the module is absent)."""
+    """Part 3 through mavins.common.parallel.run_jobs (sequential when the module is absent)."""
     t = taf()
     trajectory()  # built before the workers fork, so they inherit it
     imu, gnss, init, _, _ = t.simulate_run(trajectory(), SEED0)
@@ -750,12 +750,12 @@ def monte_carlo(runs: int, jobs: int, mag_rate: float = 0.0) -> dict[str, Any]:
     func = functools.partial(mc_run, mag_rate=mag_rate)
     start = time.perf_counter()
     try:
-        from mavins.parallel import run_jobs
+        from mavins.common.parallel import run_jobs
     except ImportError:
-        how = "sequential (mavins.parallel absent)"
+        how = "sequential (mavins.common.parallel absent)"
         results = [func(s) for s in seeds]
     else:
-        how = f"mavins.parallel.run_jobs, jobs={jobs}"
+        how = f"mavins.common.parallel.run_jobs, jobs={jobs}"
         results = run_jobs(func, seeds, jobs=jobs, label="monte carlo" + (" with magnetometer" if mag_rate > 0 else ""))
     wall = time.perf_counter() - start
     return {"results": results, "wall": wall, "how": how, "runs": runs, "mag": mag_rate}
@@ -843,7 +843,7 @@ def main(argv: Sequence[str] = ()) -> list[dict]:
     service_s = args.service_seconds if args.service_seconds is not None else (0.0 if q else 20.0)
     if args.jobs is None:
         try:
-            from mavins.parallel import default_jobs
+            from mavins.common.parallel import default_jobs
 
             jobs = default_jobs()
         except ImportError:

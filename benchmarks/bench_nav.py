@@ -236,7 +236,7 @@ def first_call(script: str, env_extra: dict[str, str] | None = None) -> dict[str
 
 def time_cli(t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray, samples: int, workdir: Path) -> dict[str, float]:
     """``mavins nav --timing`` on a CSV of the record: read/compute/write and process wall seconds."""
-    from mavins import files
+    from mavins.common import files
 
     imu = workdir / "imu.csv"
     init = workdir / "init.json"

@@ -32,11 +32,11 @@ def draw(seed: int, seconds: float, grade: str) -> list[tuple[float, float, floa
     from sim.scenarios import load
     from sim.stream import StreamOptions, frames
 
-    from mavins.livefilter import FilterSettings
-    from mavins.engine import EngineConfig
+    from mavins.live.livefilter import FilterSettings
+    from mavins.live.engine import EngineConfig
     from mavins.link.ingest import IngestConfig
     from mavins.link.mavlink import mavlink
-    from mavins.pipeline import Pipeline
+    from mavins.live.pipeline import Pipeline
 
     run = generate(load("static"), duration=seconds, rate=RATE_HZ, grade="ideal", seed=seed)
     mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=mavlink.MAV_COMP_ID_AUTOPILOT1)

@@ -5,7 +5,7 @@
 2. Monte Carlo: ``runs`` strapdown runs (core/runner.py, the same kernel as
    ``mavins nav``) over the scenario's exact increments, each corrupted by
    sim/errors.apply with errors drawn from the same specification (seeded per
-   run), through mavins/parallel.py (local cores or a Dask cluster); the
+   run), through mavins/common/parallel.py (local cores or a Dask cluster); the
    sample standard deviation of the error against truth at every output time.
 3. Files (docs/conventions.md "Error analysis"): covariance.csv, montecarlo.csv,
    budget.csv, plus analysis.rrd (Rerun, record/budget.py) and analysis.png
@@ -23,9 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
-from . import files
+from .common import files
 from .core import covariance as cov
-from .parallel import run_jobs
+from .common.parallel import run_jobs
 
 OUTPUT_FILES = ("covariance.csv", "montecarlo.csv", "budget.csv")
 RECORDING_FILE = "analysis.rrd"

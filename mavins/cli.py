@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 from collections.abc import Callable, Iterable, Sequence
 
-from .argcheck import checked
+from .common.argcheck import checked
 
 EXIT_USAGE = 2
 
@@ -379,7 +379,7 @@ class _Vec3:
 
 
 def _cmd_nav(args: argparse.Namespace) -> int:
-    from . import files
+    from .common import files
     from .nav import NavOptions, run_nav
 
     from .core.settings import strapdown_from_options
@@ -419,7 +419,7 @@ def _cmd_nav(args: argparse.Namespace) -> int:
 
 def _cmd_nav_each(args: argparse.Namespace, opts: object) -> int:
     """``mavins nav --each A.csv B.csv ... -o DIR``: a batch on every core; exit 2 if any file failed."""
-    from . import files
+    from .common import files
     from .nav import run_nav_batch
 
     bad = [name for name, v in (("--gnss", args.gnss), ("--baro", args.baro), ("--mag", args.mag),
@@ -446,7 +446,7 @@ def _cmd_nav_each(args: argparse.Namespace, opts: object) -> int:
 
 def _cmd_nav_fdi(args: argparse.Namespace, opts: object) -> int:
     """``mavins nav IMU0.csv IMU1.csv ... [--fdi-log FDI.csv]``: parse, call mavins.navfdi, report."""
-    from . import files
+    from .common import files
     from .navfdi import run_nav_fdi, strapdown_keywords
 
     try:
@@ -525,7 +525,7 @@ def _add_sim(sub: argparse._SubParsersAction) -> None:
 
 
 def _cmd_sim(args: argparse.Namespace) -> int:
-    from . import files
+    from .common import files
     from sim.scenarios import ScenarioError, load
 
     try:
@@ -574,7 +574,7 @@ def _cmd_sim(args: argparse.Namespace) -> int:
     from sim.generate import run_duration
     from sim.stream import StreamOptions, stream
 
-    from .progress import Progress
+    from .common.progress import Progress
 
     outages = (tuple(args.gnss_outage),) if args.gnss_outage else ()
     try:
@@ -724,14 +724,14 @@ def _apply_config(args: argparse.Namespace, parser: argparse.ArgumentParser) -> 
 
 
 def _engine_config(args: argparse.Namespace):  # type: ignore[no-untyped-def]
-    from .engine import EngineConfig
+    from .live.engine import EngineConfig
 
     heading: float | str = args.heading
     try:
         heading = float(args.heading)
     except (TypeError, ValueError):
         pass
-    from .livefilter import FilterSettings
+    from .live.livefilter import FilterSettings
 
     flt = FilterSettings(spec=_imu_spec(args), aiding=args.aiding, gate=args.gate, lever_arm=args.lever_arm,
                          delays=_delays(args), sigma_mag_bias=args.mag_bias, scale_factors=args.scale_factors)
@@ -805,7 +805,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     import threading
 
     _apply_config(args, args.parser)
-    from .files import DataFileError, check_outputs
+    from .common.files import DataFileError, check_outputs
 
     master = Path(args.master.split(",")[0])  # a serial device or a log file is an input too
     key_state = args.signing_key.with_name(args.signing_key.name + ".timestamp") if args.signing_key else None
@@ -880,7 +880,7 @@ def _add_replay(sub: argparse._SubParsersAction) -> None:
 
 def _cmd_replay(args: argparse.Namespace) -> int:
     _apply_config(args, args.parser)
-    from .files import DataFileError, ResourceError, check_outputs
+    from .common.files import DataFileError, ResourceError, check_outputs
     from .replay import replay
 
     try:
@@ -935,7 +935,7 @@ def _add_demo(sub: argparse._SubParsersAction) -> None:
 def _cmd_demo(args: argparse.Namespace) -> int:
     import threading
 
-    from .files import DataFileError, ResourceError, check_outputs
+    from .common.files import DataFileError, ResourceError, check_outputs
     from sim.generate import check_size
     from sim.scenarios import ScenarioError, load
 
@@ -998,7 +998,7 @@ def _cmd_key(args: argparse.Namespace) -> int:
     except UnicodeEncodeError:
         print("mavins key: error: the passphrase must be ASCII (MAVProxy hashes its ASCII bytes)", file=sys.stderr)
         return EXIT_USAGE
-    from .files import DataFileError, atomic_output
+    from .common.files import DataFileError, atomic_output
 
     if args.file.is_dir():
         print(f"mavins key: error: {args.file} is a directory, expected a file to write", file=sys.stderr)
@@ -1073,7 +1073,7 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
 
     from .analysis import AnalysisOptions, run_analyze
     from .core import covariance
-    from .parallel import JobError
+    from .common.parallel import JobError
 
     try:
         keys = _imu_spec(args, covariance.ANALYSIS_KEYS)

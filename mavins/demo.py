@@ -24,11 +24,11 @@ from typing import Callable
 
 import numpy as np
 
-from .livefilter import FilterSettings
+from .live.livefilter import FilterSettings
 from .core import jit
 from .core.frames import north_east_error
 from .core.rotation import euler_to_quat, quat_angle_rows
-from .engine import EngineConfig
+from .live.engine import EngineConfig
 from .link.ingest import IngestConfig
 from .link.mavlink import mavutil
 from .link.publish import PublishConfig

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import files
+from .common import files
 from .core.settings import Strapdown
 
 
@@ -384,7 +384,7 @@ def run_nav_batch(imu_paths: list[Path], init_path: Path | None, out_dir: Path, 
     others: its error comes back in its row of the result
     ``(imu, solution, rows, error or None)``; each solution is written atomically.
     """
-    from .parallel import run_jobs
+    from .common.parallel import run_jobs
 
     outs = batch_outputs(imu_paths, out_dir)
     inits = [init_path if init_path is not None else p.parent / "init.json" for p in imu_paths]

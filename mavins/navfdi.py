@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from . import files
+from .common import files
 
 FDI_COLUMNS = ("t", "event", "imu", "sensor", "axis", "statistic", "threshold")
 SAME_TIME = 1e-6  # s: rows of the IMU files must carry the same t to this

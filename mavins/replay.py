@@ -30,18 +30,18 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from . import files
+from .common import files
 from .core import magmodel
 from .core.gpstime import unix_of_gps
 from .core.records import Solution
-from .engine import EngineConfig
-from .files import FOUND, DataFileError, SolutionWriter, sniff
-from .imuset import DISCOVERY_S
+from .live.engine import EngineConfig
+from .common.files import FOUND, DataFileError, SolutionWriter, sniff
+from .live.imuset import DISCOVERY_S
 from .link.ingest import HIGHRES_ACC_GYRO, HIGHRES_MAG, IMU_MESSAGES, IngestConfig
 from .link import publish
 from .link.mavlink import mavlink
-from .pipeline import GNSS_MESSAGES, UINT16_UNKNOWN, Pipeline
-from .progress import Progress
+from .live.pipeline import GNSS_MESSAGES, UINT16_UNKNOWN, Pipeline
+from .common.progress import Progress
 
 DF_HEAD = b"\xa3\x95"
 AIDING_MESSAGES = (*GNSS_MESSAGES, "SCALED_PRESSURE")

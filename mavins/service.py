@@ -31,13 +31,13 @@ from .core.gpstime import gps_week_ms
 from .core import strapdown as sd
 from .core.runner import rest_state
 from .core.settings import strapdown_of
-from .engine import EngineConfig, State
-from .files import SolutionWriter
+from .live.engine import EngineConfig, State
+from .common.files import SolutionWriter
 from .link import publish
 from .link.ingest import IMU_MESSAGES, IngestConfig
 from .link.links import Link, PeerPolicy, open_link
 from .link.mavlink import mavlink
-from .pipeline import Pipeline
+from .live.pipeline import Pipeline
 from .record.sink import GuardedSink, Sink
 from .link.signing import Signer, Verifier
 
@@ -102,7 +102,7 @@ def warm_up(engine_cfg: EngineConfig, pub: publish.PublishConfig) -> float:
         # two cores at once: a second process compiles the filter's measurement and propagation
         # kernels into the shared cache while this one compiles the strapdown kernel; the filter's
         # top-level kernels then load them (29.4 -> 20.4 s on a 2-core machine, benchmarks/bench_startup.py)
-        code = "from mavins.livefilter import warm_measurements; warm_measurements()"
+        code = "from mavins.live.livefilter import warm_measurements; warm_measurements()"
         helper = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         kcfg = sd.make_config(**strapdown_of(engine_cfg).keywords())
         jit.for_frame(sd.push_rate_scalars, sd.kernel_frame(kcfg))(rest_state(), kcfg, 0.01, 0.0, 0.0, 0.0, 0.0, 0.0, -9.8)

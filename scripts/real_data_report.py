@@ -51,7 +51,7 @@ import numpy as np
 from mavins.core import earth
 from mavins.core.frames import north_east_error
 from mavins.core.rotation import quat_angle_rows, wrap_pi
-from mavins.files import DataFileError, atomic_output
+from mavins.common.files import DataFileError, atomic_output
 
 LOG = ROOT / "data" / "px4-gps-small" / "sample_log_small.ulg"
 PNG = ROOT / "docs" / "images" / "real-data-aided.png"

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Iterator
 
 import numpy as np
 
-from mavins import files
+from mavins.common import files
 
 from . import errors, faults, polar
 from .polar import EarthFixedMotion

@@ -41,7 +41,7 @@ from .generate import SimRun
 from .trajectory import instant_rates
 
 from mavins.link.mavlink import mavlink, mavutil
-from mavins.progress import Progress
+from mavins.common.progress import Progress
 
 G0 = 9.80665  # ArduPilot's mG scale (m/s^2 per 1000 mG)
 HIGHRES_ACC_GYRO = 0b111111  # fields_updated: x/y/z acc and gyro

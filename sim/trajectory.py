@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mavins.core import earth
-from mavins.progress import Progress
+from mavins.common.progress import Progress
 
 from . import kinematics as kin
 

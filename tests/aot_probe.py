@@ -16,7 +16,7 @@ from mavins.demo import _engine_config
 from mavins.link.ingest import IngestConfig
 from mavins.link.mavlink import mavlink
 from mavins.link.publish import PublishConfig, encode
-from mavins.pipeline import Pipeline
+from mavins.live.pipeline import Pipeline
 from sim.generate import generate
 from sim.scenarios import load
 from sim.stream import StreamOptions, frames

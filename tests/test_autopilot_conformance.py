@@ -254,7 +254,7 @@ def _rest_imu(mav: mavlink.MAVLink, t_us: int) -> bytes:
 def _serve_in_process(publish: PublishConfig, frames: list[bytes], done: Callable[[Received], bool]) -> Received:
     """An in-process service (position typed, heading 30 deg, 1 s alignment, 10 Hz output) on
     127.0.0.1, fed ``frames`` (paced: 10 ms every 50), until ``done`` holds for what came back."""
-    from mavins.engine import EngineConfig
+    from mavins.live.engine import EngineConfig
     from mavins.link.ingest import IngestConfig
     from mavins.service import Service, ServiceConfig
 

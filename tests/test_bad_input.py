@@ -37,8 +37,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from mavins import cli, files
-from mavins.files import DataFileError, ResourceError
+from mavins import cli
+from mavins.common import files
+from mavins.common.files import DataFileError, ResourceError
 from mavins.link.mavlink import mavlink
 from mavins.replay import open_log
 
@@ -404,13 +405,13 @@ def test_numeric_option_out_of_range_is_refused_at_parse_time(world: Path, cmd: 
 
 
 def test_heading_words_are_the_engines() -> None:
-    from mavins import engine
+    from mavins.live import engine
 
     assert cli.HEADING_WORDS == engine.HEADING_WORDS
 
 
 def test_aiding_words_are_the_filters() -> None:
-    from mavins import livefilter
+    from mavins.live import livefilter
 
     assert cli.AIDING_WORDS == livefilter.AIDING_KINDS
 
@@ -506,7 +507,7 @@ def _sigterm() -> None:
 @pytest.mark.parametrize("how,code", [(_ctrl_c, 130), (_sigterm, 143)], ids=["ctrl-c", "sigterm"])
 def test_interrupted_writers_leave_the_old_output_and_no_temporary(world: Path, monkeypatch: pytest.MonkeyPatch,
                                                                    how, code: int) -> None:  # type: ignore[no-untyped-def]
-    import mavins.pipeline
+    import mavins.live.pipeline
 
     previous = signal.getsignal(signal.SIGTERM)
     before = snapshot(world)
@@ -514,7 +515,7 @@ def test_interrupted_writers_leave_the_old_output_and_no_temporary(world: Path, 
         _interrupt_on(m, files, "write_rows", 0, how)  # nav: while writing the solution
         assert run_cli("nav", "imu.csv", "--init", "init.json", "-o", "existing.csv")[0] == code
     with monkeypatch.context() as m:
-        _interrupt_on(m, mavins.pipeline.Pipeline, "handle", 100, how)  # replay: halfway through the log
+        _interrupt_on(m, mavins.live.pipeline.Pipeline, "handle", 100, how)  # replay: halfway through the log
         assert run_cli("replay", "good.tlog", "-o", "existing.csv", "--rerun", "new.rrd", *NAV_ARGS)[0] == code
     with monkeypatch.context() as m:
         _interrupt_on(m, files, "write_table", 1, how)  # sim: between its files

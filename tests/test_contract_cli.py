@@ -317,9 +317,9 @@ def test_review_without_a_viewer_fails_in_one_line(demo: tuple[subprocess.Comple
     assert res.returncode == 2 and len([ln for ln in res.stderr.splitlines() if ln.strip()]) == 1, res.stderr
 
 
-# --- mavins/progress.py --------------------------------------------------------------------------
+# --- mavins/common/progress.py --------------------------------------------------------------------------
 PROGRESS_SCRIPT = """
-from mavins.progress import Progress
+from mavins.common.progress import Progress
 with Progress("crunch", 10) as p:
     for i in range(11):
         p.update(i)

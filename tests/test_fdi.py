@@ -255,9 +255,9 @@ def test_live_pipeline_fuses_the_streamed_imus_and_isolates_a_fault(msg: str, tm
     (highres run) records every window test to Rerun."""
     from pymavlink.dialects.v20 import common as mavlink2
 
-    from mavins.engine import EngineConfig
+    from mavins.live.engine import EngineConfig
     from mavins.link.ingest import IngestConfig
-    from mavins.pipeline import Pipeline
+    from mavins.live.pipeline import Pipeline
     from mavins.record.recorder import Recorder
     from sim.stream import StreamOptions, frames
 

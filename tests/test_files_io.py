@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 from support import ENV, MAVINS
 
-from mavins import files
+from mavins.common import files
 
 COLS = files.INCREMENT_COLUMNS
 

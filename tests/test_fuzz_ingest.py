@@ -57,7 +57,7 @@ from hypothesis import strategies as st
 
 os.environ.setdefault("MAVLINK20", "1")
 
-from mavins.engine import EngineConfig, State  # noqa: E402
+from mavins.live.engine import EngineConfig, State  # noqa: E402
 from mavins.link.ingest import IngestConfig  # noqa: E402
 from mavins.link.links import _parser  # noqa: E402
 from mavins.link.mavlink import mavlink  # noqa: E402

@@ -10,7 +10,7 @@ import math
 import pytest
 
 from mavins.link.mavlink import mavlink
-from mavins.pipeline import GNSS_MAX_SIGMA, gnss_fix, gnss_invalid
+from mavins.live.pipeline import GNSS_MAX_SIGMA, gnss_fix, gnss_invalid
 
 ENC = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
 LAT, LON = 473977420, 85455940  # 1e-7 deg
@@ -127,7 +127,7 @@ def _raw_yaw(yaw: int, hdg_acc: int = 0, name: str = "GPS_RAW_INT") -> object:
 def test_dual_antenna_heading_in_cdeg_from_north(name: str, yaw: int, deg: float) -> None:
     """common.xml: yaw in cdeg clockwise from true north, 36000 for north (0 means not available); the heading
     comes back in rad in (-180, 180] deg; hdg_acc is degE5 (150000 = 1.5 deg), 0 unknown (1 deg)."""
-    from mavins.pipeline import gnss_heading
+    from mavins.live.pipeline import gnss_heading
 
     h = gnss_heading(_raw_yaw(yaw, 150000, name))
     assert h is not None and abs(math.degrees(h[0]) - deg) < 1e-9 and abs(math.degrees(h[1]) - 1.5) < 1e-12
@@ -136,7 +136,7 @@ def test_dual_antenna_heading_in_cdeg_from_north(name: str, yaw: int, deg: float
 
 def test_no_heading_when_the_receiver_has_none() -> None:
     """yaw 0 is 'not available'; above 36000 is no heading; a GPS_INPUT carries no hdg_acc here."""
-    from mavins.pipeline import gnss_heading
+    from mavins.live.pipeline import gnss_heading
 
     assert gnss_heading(_raw_yaw(0)) is None and gnss_heading(_raw_yaw(36001)) is None
     assert gnss_heading(_decoded(ENC.gps_input_encode(5_000_000, 0, 0, 0, 0, 3, LAT, LON, 488.0, 1.0, 1.0,

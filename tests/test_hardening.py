@@ -493,9 +493,9 @@ def accepted_samples(datagrams: list[bytes], usec_to_index: dict[int, int]) -> n
 
 def clean_solution(items: list[Item], args: dict) -> np.ndarray:
     """The same stream without losses through the same pipeline, in process: the solution rows."""
-    from mavins.engine import EngineConfig
+    from mavins.live.engine import EngineConfig
     from mavins.link.ingest import IngestConfig
-    from mavins.pipeline import Pipeline
+    from mavins.live.pipeline import Pipeline
 
     pipe = Pipeline(EngineConfig(**args), IngestConfig())
     p = mavlink.MAVLink(None)

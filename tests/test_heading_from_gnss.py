@@ -15,9 +15,9 @@ import math
 import numpy as np
 import pytest
 
-from mavins.livefilter import FilterSettings
+from mavins.live.livefilter import FilterSettings
 from mavins.core.records import ImuSample
-from mavins.engine import GNSS_YAW, GNSS_YAW_PENDING, Engine, EngineConfig
+from mavins.live.engine import GNSS_YAW, GNSS_YAW_PENDING, Engine, EngineConfig
 from sim.aiding import GnssConfig, simulate_aiding
 from sim.generate import generate
 from sim.scenarios import load

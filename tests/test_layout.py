@@ -15,24 +15,21 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 
-UTILITIES = {"mavins.files", "mavins.argcheck", "mavins.progress", "mavins.parallel"}
-LIVE_SHELL = {"mavins.engine", "mavins.pipeline", "mavins.livefilter", "mavins.imuset"}
+# the rooms are folders of mavins/ (DEVELOPERS.md "Layout"); the command faces sit at its top
+ROOMS = {"mavins.core": "core", "mavins.link": "link", "mavins.record": "record", "mavins.common": "utilities",
+         "mavins.live": "live"}
 FACES = {"mavins.cli", "mavins.service", "mavins.replay", "mavins.demo", "mavins.nav", "mavins.navfdi",
          "mavins.analysis", "mavins.__main__"}
 SAME_NAME_BY_DESIGN = {"__init__.py", "__main__.py", "exports.py"}  # exports.py: one per built package (core/aot.py)
 
 
 def room(module: str) -> str:
-    """The room of a module (DEVELOPERS.md "Layout")."""
-    if module == "mavins" or module.startswith("mavins.core"):  # the package's __init__ holds its version only
+    """The room of a module (DEVELOPERS.md "Layout"): its folder, or the faces at the top."""
+    if module == "mavins":  # the package's __init__ holds its version only
         return "core"
-    for prefix in ("mavins.link", "mavins.record"):
+    for prefix, name in ROOMS.items():
         if module == prefix or module.startswith(prefix + "."):
-            return prefix.split(".")[1]
-    if module in UTILITIES:
-        return "utilities"
-    if module in LIVE_SHELL:
-        return "live"
+            return name
     if module in FACES:
         return "faces"
     if module == "sim" or module.startswith("sim."):

@@ -266,9 +266,9 @@ def test_frames_run_without_jit(tmp_path):
 def test_service_marks_geographic_degraded_near_the_pole(frame, degraded):
     """The engine (mavins run/replay) at rest at 89.9 deg N: the geographic frame's solutions say
     degraded, with one warning; the wander frame's do not."""
-    from mavins.livefilter import FilterSettings
+    from mavins.live.livefilter import FilterSettings
     from mavins.core.records import ImuSample
-    from mavins.engine import Engine, EngineConfig
+    from mavins.live.engine import Engine, EngineConfig
 
     dt = 0.01
     m = motion.stationary(89.9, 0.0, 0.0, 0.0, 30.0, dt, 400)
@@ -287,8 +287,8 @@ def test_service_marks_geographic_degraded_near_the_pole(frame, degraded):
 
 
 def test_aided_frames_refused():
-    from mavins.livefilter import FilterSettings
-    from mavins.engine import Engine, EngineConfig
+    from mavins.live.livefilter import FilterSettings
+    from mavins.live.engine import Engine, EngineConfig
 
     with pytest.raises(ValueError, match="aiding none"):
         Engine(EngineConfig(frame="wander", filter=FilterSettings(aiding=("gnss",))))

@@ -1,4 +1,4 @@
-"""Mutation-testing kills for mavins/livefilter.py, the live filter's stateful shell (docs/testing.md).
+"""Mutation-testing kills for mavins/live/livefilter.py, the live filter's stateful shell (docs/testing.md).
 
 LiveFilter in-process on a level vehicle in laboratory mode (earth = none: no Earth rate,
 constant gravity, the position a flat NED offset from the start in metres, strapdown.position),
@@ -19,8 +19,8 @@ import math
 import numpy as np
 import pytest
 
-from mavins import livefilter
-from mavins.livefilter import AIDING_KINDS, FilterSettings, LiveFilter
+from mavins.live import livefilter
+from mavins.live.livefilter import AIDING_KINDS, FilterSettings, LiveFilter
 from mavins.core import errmodel as em
 from mavins.core import kalman as kf
 from mavins.core import strapdown as sd

@@ -1,4 +1,4 @@
-"""Mutation-testing kills for mavins/engine.py (docs/testing.md).
+"""Mutation-testing kills for mavins/live/engine.py (docs/testing.md).
 
 The engine in-process, fed ImuSamples at rest built from the physics typed here
 (``f^b = -C_n^b [0, 0, gamma]``, ``w^b = C_n^b w_ie^n``, ``m^b = C_n^b m^n``; ZYX
@@ -22,9 +22,9 @@ import math
 import numpy as np
 import pytest
 
-from mavins.livefilter import FilterSettings
+from mavins.live.livefilter import FilterSettings
 from mavins.core.records import ImuSample
-from mavins.engine import Engine, EngineConfig, State
+from mavins.live.engine import Engine, EngineConfig, State
 from support import cbn as c_bn
 from support import gamma as gamma_rad
 
@@ -893,7 +893,7 @@ def test_zero_velocity_updates_exactly(case):
 def test_body_rate_is_the_raw_rate_minus_both_gyro_bias_parts_to_the_bit() -> None:
     """LiveFilter.body_rate (floats, per attitude update) equals numpy's w - (constant + Gauss-Markov
     bias) bit for bit, and uses neither the accelerometer parts nor another axis."""
-    from mavins.livefilter import LiveFilter
+    from mavins.live.livefilter import LiveFilter
     from mavins.core import kalman
 
     flt = LiveFilter(FilterSettings(spec="consumer"))

@@ -1,4 +1,4 @@
-"""Mutation-testing kills for mavins/files.py, the contract's files (docs/testing.md).
+"""Mutation-testing kills for mavins/common/files.py, the contract's files (docs/testing.md).
 
 Every file is real, written by hand in tmp_path with known text or bytes: IMU tables
 (docs/conventions.md "Files": a header line, extra columns ignored, round-trip floats), the
@@ -25,8 +25,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mavins import files
-from mavins.files import DataFileError, ResourceError
+from mavins.common import files
+from mavins.common.files import DataFileError, ResourceError
 
 COLS = files.INCREMENT_COLUMNS
 HEADER = "t,dtheta_x,dtheta_y,dtheta_z,dv_x,dv_y,dv_z"

@@ -1,4 +1,4 @@
-"""Mutation-testing kills for mavins/imuset.py (live ``--imus``) and mavins/navfdi.py (``mavins nav IMU0 IMU1 ...
+"""Mutation-testing kills for mavins/live/imuset.py (live ``--imus``) and mavins/navfdi.py (``mavins nav IMU0 IMU1 ...
 --fdi-log``), docs/testing.md.
 
 In-process: real pymavlink messages (encoded by a sender, packed, parsed back) into ``ImuSet.sample``, real
@@ -35,8 +35,8 @@ from mavins.core import errmodel
 from mavins.core.fdi import FdiEvent
 from mavins.core.grades import grade_figures
 from mavins.core.settings import Strapdown
-from mavins.files import DataFileError
-from mavins.imuset import ImuSet, imu_index
+from mavins.common.files import DataFileError
+from mavins.live.imuset import ImuSet, imu_index
 from mavins.link.ingest import IngestConfig
 from mavins.link.mavlink import mavlink
 from mavins.nav import NavOptions

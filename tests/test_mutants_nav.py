@@ -24,7 +24,7 @@ import pytest
 
 from mavins import cli, nav
 from mavins.core.settings import Strapdown
-from mavins.files import DataFileError
+from mavins.common.files import DataFileError
 from support import gamma
 
 

@@ -1,4 +1,4 @@
-"""Mutation-testing kills for mavins/pipeline.py (docs/testing.md).
+"""Mutation-testing kills for mavins/live/pipeline.py (docs/testing.md).
 
 In-process: real pymavlink messages (encoded by a sender, packed, parsed back) into
 ``gnss_fix``/``gnss_invalid``/``isa_height`` and into ``Pipeline.handle`` with a
@@ -20,8 +20,8 @@ import numpy as np
 
 import pytest
 
-from mavins import pipeline as pl
-from mavins.engine import EngineConfig
+from mavins.live import pipeline as pl
+from mavins.live.engine import EngineConfig
 from mavins.link.mavlink import mavlink
 
 SIGMA_H, SIGMA_V, SIGMA_VEL = 2.5, 5.0, 0.3  # docs/conventions.md GNSS defaults
@@ -445,7 +445,7 @@ def test_restart_needs_more_than_a_second_back(pipe):
 
 
 def test_the_pipeline_builds_its_engine_and_ingest():
-    from mavins.engine import Engine
+    from mavins.live.engine import Engine
     from mavins.link.ingest import Ingest
     p = pl.Pipeline(EngineConfig(lat=1.0, lon=2.0, alt=3.0))
     assert isinstance(p.engine, Engine) and p.engine.origin == (1.0, 2.0, 3.0)
@@ -461,8 +461,8 @@ def test_imus_are_fused_before_the_engine():
     """--imus 0,1: both HIGHRES_IMU streams reach one ImuSet (docs/redundancy.md), the engine gets
     one sample per instant, the least-squares fusion of two identically mounted equal-noise IMUs:
     their mean."""
-    from mavins.livefilter import FilterSettings
-    from mavins.imuset import ImuSet
+    from mavins.live.livefilter import FilterSettings
+    from mavins.live.imuset import ImuSet
     from mavins.link.ingest import IngestConfig
 
     p = pl.Pipeline(EngineConfig(filter=FilterSettings(spec="tactical")), IngestConfig(imus=(0, 1),
@@ -562,7 +562,7 @@ def test_outputs_filter_and_counters_are_recorded():
 def test_fdi_tests_are_recorded():
     """--imus: every window test of the set (time, sensor, statistic, threshold, residuals) reaches
     the recording as the set reports it."""
-    from mavins.livefilter import FilterSettings
+    from mavins.live.livefilter import FilterSettings
     from mavins.link.ingest import IngestConfig
 
     p = pl.Pipeline(EngineConfig(filter=FilterSettings(spec="tactical")), IngestConfig(imus=(0, 1)))

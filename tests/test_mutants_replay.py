@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 
 from mavins import replay
-from mavins.files import DataFileError
+from mavins.common.files import DataFileError
 from mavins.link.mavlink import mavlink
 from mavins.replay import LogReport, open_log
 
@@ -891,8 +891,8 @@ def test_ulog_magnetometer_without_its_fields_and_repeated_nan(tmp_path: Path) -
 # reaction) and no rotation, 100 Hz from sensor time 1.00 s. With --lat/--lon/--alt given, --align 0.5
 # and --rate 10 the alignment ends at 1.50 s and rows follow at 10 Hz until the last sample at 1.99 s.
 
-from mavins.livefilter import FilterSettings  # noqa: E402
-from mavins.engine import EngineConfig  # noqa: E402
+from mavins.live.livefilter import FilterSettings  # noqa: E402
+from mavins.live.engine import EngineConfig  # noqa: E402
 from mavins.link.ingest import IngestConfig  # noqa: E402
 
 G_STD = 9.80665
@@ -1443,7 +1443,7 @@ def test_read_tracker_counts_its_first_read_as_progress_and_reads_at_the_end_as_
 
 def test_ulog_larger_than_the_memory_is_refused_before_reading(tmp_path: Path) -> None:
     """A (sparse) 1 TiB ULog would need about twice its size in memory: 2048.0 GiB, refused up front."""
-    from mavins.files import ResourceError
+    from mavins.common.files import ResourceError
 
     log = tmp_path / "huge.ulg"
     with open(log, "wb") as fh:

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mavins import files
+from mavins.common import files
 from sim.motion import stationary
 
 SOLUTION_HEADER = "t,lat,lon,h,vn,ve,vd,roll,pitch,yaw,qw,qx,qy,qz"

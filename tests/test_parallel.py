@@ -1,4 +1,4 @@
-"""mavins.parallel.run_jobs: item order, failures, a local pool and a real Dask LocalCluster."""
+"""mavins.common.parallel.run_jobs: item order, failures, a local pool and a real Dask LocalCluster."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import os
 import numpy as np
 import pytest
 
-from mavins.parallel import JobError, run_jobs
+from mavins.common.parallel import JobError, run_jobs
 
 
 def seeded_job(seed: int) -> tuple[int, int, np.ndarray]:

@@ -25,10 +25,10 @@ import numpy as np
 import pytest
 
 from mavins.core import earth
-from mavins.engine import EngineConfig
+from mavins.live.engine import EngineConfig
 from mavins.link.ingest import HIGHRES_MAG, IngestConfig
 from mavins.link.mavlink import mavlink
-from mavins.pipeline import gnss_fix
+from mavins.live.pipeline import gnss_fix
 from mavins.replay import open_log, replay, ulog_baro, ulog_gps
 
 ROOT = Path(__file__).parents[1]

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from mavins.engine import EngineConfig
+from mavins.live.engine import EngineConfig
 from mavins.link.ingest import IngestConfig
 from mavins.link.mavlink import mavlink
 from mavins.record.recorder import Recorder

@@ -598,8 +598,8 @@ def _serve_in_thread(svc) -> tuple[threading.Event, threading.Thread, list[BaseE
 
 def test_in_process_service_waits_for_gps_and_takes_its_origin() -> None:
     """No --lat/--lon/--alt: WAITING until the vehicle's GPS_RAW_INT, then the origin is that fix."""
-    from mavins.livefilter import FilterSettings
-    from mavins.engine import EngineConfig
+    from mavins.live.livefilter import FilterSettings
+    from mavins.live.engine import EngineConfig
     from mavins.link.ingest import IngestConfig
     from mavins.service import Service, ServiceConfig
 
@@ -643,7 +643,7 @@ def test_in_process_service_waits_for_gps_and_takes_its_origin() -> None:
 
 def test_waiting_is_announced_until_a_position_arrives() -> None:
     """Without --lat/--lon/--alt and before any GPS fix, a GCS must be told why nothing is published."""
-    from mavins.engine import EngineConfig
+    from mavins.live.engine import EngineConfig
     from mavins.link.ingest import IngestConfig
     from mavins.service import Service, ServiceConfig
 
@@ -684,7 +684,7 @@ def test_waiting_is_announced_until_a_position_arrives() -> None:
 
 def test_request_imu_asks_an_autopilot_that_sends_only_heartbeats() -> None:
     """PX4 sends no HIGHRES_IMU unless asked: --request-imu must ask on the strength of its HEARTBEAT."""
-    from mavins.engine import EngineConfig
+    from mavins.live.engine import EngineConfig
     from mavins.link.ingest import IngestConfig
     from mavins.service import Service, ServiceConfig
 

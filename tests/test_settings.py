@@ -11,7 +11,7 @@ import pytest
 
 from mavins.core import settings
 from mavins.core import strapdown as sd
-from mavins.engine import EngineConfig
+from mavins.live.engine import EngineConfig
 from mavins.nav import NavOptions
 from support import ENV, MAVINS
 

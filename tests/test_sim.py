@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mavins import files
+from mavins.common import files
 from mavins.cli import main as cli_main
 from mavins.core.runner import navigate
 from sim import kinematics as kin

@@ -394,9 +394,9 @@ def test_cli_stream_raw(tmp_path) -> None:
 def test_extra_imus_and_the_service_selects_one() -> None:
     """--imus 3: HIGHRES_IMU ids 0, 1, 2 (or RAW_IMU + SCALED_IMU2/3), each with its own errors;
     the service's ingest picks one IMU by message and id and navigates on it."""
-    from mavins.engine import EngineConfig
+    from mavins.live.engine import EngineConfig
     from mavins.link.ingest import IngestConfig
-    from mavins.pipeline import Pipeline
+    from mavins.live.pipeline import Pipeline
 
     run = generate(load("static"), duration=12.0, rate=100.0, grade="industrial", seed=3)
     for msg, names in (("highres", {"HIGHRES_IMU"}), ("raw", {"RAW_IMU", "SCALED_IMU2", "SCALED_IMU3"})):
@@ -462,9 +462,9 @@ def test_the_service_aids_with_the_streamed_magnetometer() -> None:
     builds it) fed the decoded stream of the flight's first 4 s (at rest) with --aiding mag applies every
     streamed sample (10 Hz: each one is on the live path's 20 ms grid) after navigation starts (the first solution;
     the one at that instant may come before the filter does), all accepted; without mag_rate none."""
-    from mavins.livefilter import FilterSettings
-    from mavins.engine import EngineConfig
-    from mavins.pipeline import Pipeline
+    from mavins.live.livefilter import FilterSettings
+    from mavins.live.engine import EngineConfig
+    from mavins.live.pipeline import Pipeline
 
     run = generate(load("flight"), duration=4.0, usec_grid=True)
     init = run.init()

@@ -36,7 +36,7 @@ class IngestConfig:
     raw_mag_scale: float = 1e-3  # gauss per RAW_IMU count (mgauss)
     max_accel: float = 16 * G0  # sensor range (m/s^2)
     max_gyro: float = math.radians(2000.0)  # sensor range (rad/s)
-    imus: tuple[int, ...] | None = None  # --imus: IMU numbers to fuse, () = all seen (mavins/imuset.py)
+    imus: tuple[int, ...] | None = None  # --imus: IMU numbers to fuse, () = all seen (mavins/live/imuset.py)
     false_alarm: float = 1e-6  # --false-alarm: design probability of each FDI test
 
 

@@ -31,7 +31,7 @@ import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
-from ..argcheck import checked
+from ..common.argcheck import checked
 
 PACKAGES = "xvfb mesa-vulkan-drivers libvulkan1"
 INSTALL_HINT = f"install them with: apt-get install -y {PACKAGES} (or scripts/install_viewer_deps.sh)"
@@ -254,7 +254,7 @@ def screenshot(rrd: Path, out_png: Path, size: tuple[int, int] = (1600, 900), ti
     if not (MIN_SIZE[0] <= w <= MAX_SIZE[0] and MIN_SIZE[1] <= h <= MAX_SIZE[1]):
         raise ValueError(f"window size {w}x{h} is outside {MIN_SIZE[0]}x{MIN_SIZE[1]}..{MAX_SIZE[0]}x{MAX_SIZE[1]}")
     check_recording(rrd)
-    from mavins.files import atomic_output, check_outputs
+    from mavins.common.files import atomic_output, check_outputs
 
     check_outputs({"--screenshot": out_png}, {"FILE.rrd": rrd})
     xvfb, icd = check_dependencies()
@@ -277,7 +277,7 @@ def check_recording(rrd: Path) -> None:
     if not head:
         raise ValueError(f"{rrd}: the file is empty (expected a Rerun recording, .rrd)")
     if not head.startswith(RRD_MAGIC):
-        from mavins.files import FOUND, sniff
+        from mavins.common.files import FOUND, sniff
 
         found = FOUND.get(sniff(head) or "", "")
         raise ValueError(f"{rrd}: expected a Rerun recording (.rrd, starting with 'RRF'), found "

@@ -17,13 +17,13 @@ from typing import Callable
 
 import numpy as np
 
-from .core import align, earth, kalman, magmodel, yawgsf
-from .core import strapdown as sd
-from .core.jit import for_frame
-from .core.records import ImuSample, Solution
-from .core.settings import Strapdown, strapdown_of
+from ..core import align, earth, kalman, magmodel, yawgsf
+from ..core import strapdown as sd
+from ..core.jit import for_frame
+from ..core.records import ImuSample, Solution
+from ..core.settings import Strapdown, strapdown_of
 from .livefilter import GNSS_HEADING, GNSS_YAW_PENDING, FilterSettings, LiveFilter
-from .core.rotation import euler_to_dcm
+from ..core.rotation import euler_to_dcm
 
 
 class State(str, Enum):

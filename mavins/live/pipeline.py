@@ -16,15 +16,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .core import aided
-from .core import strapdown as sd
-from .core.frames import local_ned
-from .core.records import ImuSample, Solution
+from ..core import aided
+from ..core import strapdown as sd
+from ..core.frames import local_ned
+from ..core.records import ImuSample, Solution
 from .engine import Engine, EngineConfig
 from .imuset import ImuSet
-from .link.ingest import IMU_MESSAGES, Ingest, IngestConfig
-from .link.mavlink import mavlink
-from .record.sink import Sink
+from ..link.ingest import IMU_MESSAGES, Ingest, IngestConfig
+from ..link.mavlink import mavlink
+from ..record.sink import Sink
 
 log = logging.getLogger("mavins")
 

@@ -20,7 +20,7 @@ One function, :func:`run_jobs`, is the project's way to map a job over items
 * A job that raises stops the run: the jobs not started are cancelled and
   :class:`JobError` names the item's index and value, chained to the job's
   exception.
-* A progress bar (mavins.progress) counts finished jobs on a terminal.
+* A progress bar (mavins.common.progress) counts finished jobs on a terminal.
 
 The local pool forks (on platforms that have fork): workers start with the
 parent's imported modules and compiled kernels, so each job pays only its

@@ -761,7 +761,7 @@ class SolutionWriter:
         self._width = len(columns)
         self._factors = None
         if self._width != len(SOLUTION_COLUMNS):
-            from .core.aided import unit_factors
+            from ..core.aided import unit_factors
 
             self._factors = unit_factors(columns)
         self.rows = 0

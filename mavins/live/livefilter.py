@@ -18,11 +18,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .core import aided, earth, errmodel, kalman
-from .core import strapdown as sd
-from .core.frames import north_east_error
-from .core.jit import for_frame
-from .core.records import Uncertainty
+from ..core import aided, earth, errmodel, kalman
+from ..core import strapdown as sd
+from ..core.frames import north_east_error
+from ..core.jit import for_frame
+from ..core.records import Uncertainty
 
 AIDING_KINDS = ("gnss", "baro", "mag", "zupt")
 ABS_TIMEOUT_S = 5.0  # s of sensor time after the last accepted fix during which position counts as absolute
@@ -330,7 +330,7 @@ class LiveFilter:
 def warm_measurements() -> None:
     """Load or compile the kernels of every measurement update and the covariance propagation
     they flush (run in a second process on a cold start: service.warm_up)."""
-    from .core.runner import rest_state
+    from ..core.runner import rest_state
 
     cfg = sd.make_config()
     s = rest_state()
@@ -341,7 +341,7 @@ def warm_measurements() -> None:
                        ("baro", (100.0, 0.5)), ("mag", ((0.2, 0.0, 0.4),)), ("gnss_yaw", (0.1, 0.02))):
         f.measure(s, cfg, 0.0, kind, *args)
     # the heading from GNSS velocity (GNSS_YAW_PENDING): the yaw bank and the reset
-    from .core import yawgsf
+    from ..core import yawgsf
 
     X, P, logw = yawgsf.make(0.0, 0.0)
     yawgsf.predict(X, P, np.array([0.01, 0.0, -0.098]), np.zeros(3), 0.0, 0.0, 0.0, 0.01)

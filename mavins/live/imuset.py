@@ -15,11 +15,11 @@ from collections import Counter
 
 import numpy as np
 
-from .core import errmodel
-from .core.fdi import FdiEvent, ImuSetMonitor
-from .core.records import ImuSample
-from .core.redundancy import ST_ALARM
-from .link.ingest import IMU_MESSAGES, Ingest, IngestConfig
+from ..core import errmodel
+from ..core.fdi import FdiEvent, ImuSetMonitor
+from ..core.records import ImuSample
+from ..core.redundancy import ST_ALARM
+from ..link.ingest import IMU_MESSAGES, Ingest, IngestConfig
 
 SAME_INSTANT = 1.5e-3  # s: ArduPilot's SCALED_IMU2/3 carry whole milliseconds beside RAW_IMU's microseconds
 DISCOVERY_S = 1.0  # s of sensor time in which ``--imus all`` collects the streams
@@ -37,7 +37,7 @@ def imu_index(msg: object) -> int | None:
 
 def _warm_up() -> None:
     """Load (or compile) the monitor's kernel now, not when the first samples wait for it."""
-    from .core.errmodel import ImuSpec
+    from ..core.errmodel import ImuSpec
 
     mon = ImuSetMonitor(2, ImuSpec(gyro_arw=1e-3, accel_vrw=1e-2), 0.01, window=0.02)
     mon.process(np.array([0.01, 0.02]), np.zeros((2, 2, 3)), np.zeros((2, 2, 3)), np.full(2, 0.01), rates=True)
@@ -97,7 +97,7 @@ class ImuSet:
         """SYS_STATUS sensor bits ``(present, unhealthy)`` of the set: IMU 0 is 3D_GYRO/3D_ACCEL, IMU 1
         3D_GYRO2/3D_ACCEL2 (MAVLink has no bit for a third IMU). A sensor is unhealthy while isolated;
         the first IMU's bit also while a detected fault could not be isolated."""
-        from .link.mavlink import mavlink
+        from ..link.mavlink import mavlink
 
         bits = {("gyro", 0): mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO, ("accel", 0): mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL,
                 ("gyro", 1): mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO2,
