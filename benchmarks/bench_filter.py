@@ -6,7 +6,7 @@ the filter's cost per IMU sample):
 1. **pyins side by side.** The simulator's flight (take-off, hover, four legs
    at 10 m/s with coordinated turns, its random vibration off), 120 s at
    100 Hz, consumer grade with the errors the 15-state model holds (the set-up
-   of tests/test_aided_filter.py, whose helpers are imported), 1 Hz GNSS with
+   of tests/core/test_aided_filter.py, whose helpers are imported), 1 Hz GNSS with
    1 m horizontal noise. mavins (``navigate_aided``) and pyins
    (``filters.run_feedback_filter`` of python-ins) get the same IMU
    increments, the same perturbed initial state and initial sigmas, the same
@@ -32,7 +32,7 @@ the filter's cost per IMU sample):
    cache, one with the cache, and pyins's first call (its numba functions
    are not cached).
 3. **Consistency.** ``--runs`` (50) Monte Carlo runs of the set-up of
-   tests/test_aided_filter.py: average NEES of position, velocity and
+   tests/core/test_aided_filter.py: average NEES of position, velocity and
    attitude against the two-sided 95 % chi-square band for that many runs,
    bias NEES at the end, GNSS NIS, and the RMS of the normalised error of
    every one of the 15 contract states (target below 1.5); the runs go
@@ -79,7 +79,7 @@ for _p in (str(HERE), str(ROOT)):
     if _p not in sys.path:
         sys.path.insert(0, _p)
 
-SEED0 = 1000  # seeds SEED0, SEED0 + 1, ...: the first 20 are those of tests/test_aided_filter.py
+SEED0 = 1000  # seeds SEED0, SEED0 + 1, ...: the first 20 are those of tests/core/test_aided_filter.py
 SETTLE_S = 60.0  # accuracy after the first 60 s
 REST = (0.0, 10.0)  # s: the flight's static start
 ZUPT_RATE = 10.0  # Hz: zero-velocity updates given to both filters in the rest window
@@ -104,7 +104,7 @@ _TRAJ: Any = None
 
 # --- shared set-up -----------------------------------------------------------------
 def taf() -> Any:
-    """tests/test_aided_filter.py as a module (its simulation and error helpers).
+    """tests/core/test_aided_filter.py as a module (its simulation and error helpers).
 
     Imported the way pytest imports it: its folder on the path, for the
     tests' own helpers (tests/support.py).
@@ -385,7 +385,7 @@ def compare_notes(c: dict[str, Any]) -> tuple[list[str], list[dict]]:
     lines += table(["quantity", "mavins", "pyins", "mavins/pyins", "target", "", "mavins, tests' rest set-up"], rows)
     lines.append("mavins and pyins: same increments, initial state, GNSS position+velocity and 10 Hz zero-velocity "
                  "updates at rest; last column: mavins with ZUPT at every update plus a zero-rate update at rest "
-                 "(tests/test_aided_filter.py), which pyins's interface cannot take.")
+                 "(tests/core/test_aided_filter.py), which pyins's interface cannot take.")
     pr = c["per_run"]
     lines.append("per run (seed: mavins / pyins): horizontal RMS m "
                  + ", ".join(f"{c['first'] + i}: {m['h']:.3f}/{p['h']:.3f}" for i, (m, p) in enumerate(zip(pr["mavins"], pr["pyins"])))
@@ -798,7 +798,7 @@ def mc_notes(mc: dict[str, Any]) -> tuple[list[str], list[dict]]:
                 "goal": f"< 0.5 m: {'PASS' if hr < 0.5 else 'MISS'}"})
     out.append({"case": f"filter accuracy: heading RMS after 60 s ({n} runs{what})", "value": f"{yr:.3f} deg",
                 "goal": f"< 0.1 deg: {'PASS' if yr < 0.1 else 'MISS'}"})
-    lines = [(f"Consistency over {n} Monte Carlo runs (tests/test_aided_filter.py set-up{what}, seeds {SEED0}.."
+    lines = [(f"Consistency over {n} Monte Carlo runs (tests/core/test_aided_filter.py set-up{what}, seeds {SEED0}.."
               f"{SEED0 + n - 1}; {mc['how']}, {mc['wall']:.1f} s wall):")]
     lines += table(["check", "measured", "95 % band / target", ""], rows)
     z = np.concatenate([r["z"] for r in res])

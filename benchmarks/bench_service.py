@@ -1024,7 +1024,7 @@ def gc_pauses(seconds: float, extra: list[str], freeze: bool, rate: float = 1000
 
 
 # --- flood -------------------------------------------------------------------------------
-#: The flood of tests/test_hardening.py's former timed checks: 250 Hz, then FLOOD_HZ, then 250 Hz again,
+#: The flood of tests/faces/test_hardening.py's former timed checks: 250 Hz, then FLOOD_HZ, then 250 Hz again,
 #: sensor time advancing with the sender's schedule (real time) whatever the rate.
 FLOOD_HZ, FLOOD_S, FLOOD_PRE_S, FLOOD_POST_S = 200_000.0, 6.0, 3.0, 3.0
 FLOOD_OUT_RATE = 50.0
@@ -1174,7 +1174,7 @@ def flood_run(flood_hz: float = FLOOD_HZ, flood_s: float = FLOOD_S, pre_s: float
 
 
 def flood_rows(fr: dict) -> list[dict]:
-    """Table rows of a flood run (the figures tests/test_hardening.py once asserted on timing)."""
+    """Table rows of a flood run (the figures tests/faces/test_hardening.py once asserted on timing)."""
     c, st, wall, cl = fr["counters"], fr["stats"], fr["wall"], fr["client"]
     sent, processed = int(st["sent"]), int(c.get("messages_received", 0))
     dropped = int(c.get("flood_dropped", 0))

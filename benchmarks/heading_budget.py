@@ -13,7 +13,7 @@ generated, no filter runs closed loop.
 
 Set-ups:
 
-* ``mc``: bench_filter.py's Monte Carlo and tests/test_aided_filter.py (a
+* ``mc``: bench_filter.py's Monte Carlo and tests/core/test_aided_filter.py (a
   ZUPT at every attitude update in the first 10 s at rest and a zero-rate
   update at its end, then 1 Hz GNSS position 1 m / 1.5 m and velocity
   0.1 m/s);

@@ -1,6 +1,6 @@
 """The four mechanisation frames against each other and against the simulator's truth, mid-latitude.
 
-The mid-latitude flight of tests/test_mechanisations.py: a great circle from 45 deg N, 20 deg E
+The mid-latitude flight of tests/core/test_mechanisations.py: a great circle from 45 deg N, 20 deg E
 at course 60 deg, 250 m/s, 10 km, height held, 1340 s, 2 samples per update, with and without
 the rocking (3 deg at 9 s in roll, 1.5 deg at 13 s in pitch). For each rate and each frame, the
 largest ECEF position (m), C_b^e attitude (rad) and ECEF velocity (m/s) difference over the

@@ -480,7 +480,7 @@ def report(f12, f3, f4, traj, usec, paths, output: Path, elapsed: float, dur12: 
       f"{x:.4f} rad, ωr T = {WR * T:.4e} rad, ωr/ωc = {rho:.4e}.\n")
     w("**Motion** (`sim.rins`): the paper's eq. (2), `Q(t) = Q2(t) ⊗ Q1(t)` — coning about z_r whose phase, seen "
       "from the reference frame, is ωc t + a(t), times the turntable rotation Rz(a(t)) — with the body rate of "
-      "eq. (4) (`a = ωr t`). tests/test_rins_paper.py checks eq. (2) against the product Q2 ⊗ Q1, eq. (4) "
+      "eq. (4) (`a = ωr t`). tests/core/test_rins_paper.py checks eq. (2) against the product Q2 ⊗ Q1, eq. (4) "
       "against 2 Q* ⊗ dQ/dt, eq. (6) against Q(t)* ⊗ Q(t+T) and the increments against quadrature of eq. (4); "
       "all are right as printed. The increments "
       "integrate eq. (4) in closed form: dθx = (ωc+ωr)/ωc sin α [cos ωc t], dθy = (ωc+ωr)/ωc sin α [sin ωc t], "
@@ -759,7 +759,7 @@ def report(f12, f3, f4, traj, usec, paths, output: Path, elapsed: float, dur12: 
       "grid (as the cross-check above does with sim.kinematics).\n")
     w("## Reproduce\n")
     w("```\n.venv/bin/python scripts/rins_paper.py            # this page and docs/images/rins_*.png\n"
-      ".venv/bin/python -m pytest tests/test_rins_paper.py  # the key numbers, shorter runs\n```\n")
+      ".venv/bin/python -m pytest tests/core/test_rins_paper.py  # the key numbers, shorter runs\n```\n")
     return "\n".join(L) + "\n"
 
 

@@ -5,7 +5,7 @@ Every "measured" number below comes from running
 :mod:`sim.motion`; every "theory" number comes from a closed form evaluated
 here, independently of the code under test (the N-sample coefficients are
 re-typed from docs/conventions.md as exact fractions). The derivations are the
-ones of tests/test_strapdown_closed_form.py and are summarised in the report.
+ones of tests/core/test_strapdown_closed_form.py and are summarised in the report.
 
 Run from the repository root::
 

@@ -1,5 +1,5 @@
 """The simulator's kernels that ``mavins demo`` calls from Python, built ahead of time with these
-signatures (:mod:`mavins.core.aot`; ``tests/test_aot.py`` checks them)."""
+signatures (:mod:`mavins.core.aot`; ``tests/core/test_aot.py`` checks them)."""
 
 from mavins.core.aot import Export
 

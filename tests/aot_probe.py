@@ -3,7 +3,7 @@
 The simulator generates a 12 s flight; its MAVLink messages go through the service's pipeline
 and every solution is encoded as the service publishes it. Printed: SHA-256 of the simulated
 increments and truth, SHA-256 of the published bytes, the number of solutions, and whether the
-kernels built ahead of time were loaded (tests/test_aot.py runs this with and without them).
+kernels built ahead of time were loaded (tests/core/test_aot.py runs this with and without them).
 """
 
 from __future__ import annotations

@@ -56,7 +56,7 @@ column with the sign of dp_D = -dh) and ``F_v,v``, ``F_v,p`` are Groves's
 local-frame blocks (14.2.4; his F_12, F_13, F_22, F_23; the book was not at
 hand when this was written, so the equation numbers are not cited), derived
 again below from the contract's Earth rate, transport rate and gravity and
-checked against the strapdown kernel itself (tests/test_errmodel.py):
+checked against the strapdown kernel itself (tests/core/test_errmodel.py):
 
 * ``dphi = -w_in x phi + C dw_ib - dw_in`` with ``dw_ib = -bg - gg + n_g``
   and ``dw_in`` the change of ``w_ie + w_en`` with dv, dL = dp_N/(R_N+h) and
@@ -80,7 +80,7 @@ data cannot yet separate from the accelerometer bias (about 0.3 deg in hover
 or at rest) makes these larger than the sigma of the estimated accelerometer
 bias, and a heading estimate drifting by degrees at rest lets the filter
 believe in a tilt/bias separation that is not there; the filter is then
-measurably over-confident (tests/test_aided_filter.py describes the runs).
+measurably over-confident (tests/core/test_aided_filter.py describes the runs).
 
 Discretisation over a filter step T: ``Phi = I + F T + (F T)^2 / 2`` and
 ``Qd = (Phi Qc Phi^T + Qc) T / 2``, the trapezoidal rule applied to

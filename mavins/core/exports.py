@@ -3,7 +3,7 @@
 (:mod:`mavins.core.aot`).
 
 Frames: geographic only (``frame=0``, the default of every command); the other frames compile on
-first use. A call with other argument types compiles as before. ``tests/test_aot.py`` checks that
+first use. A call with other argument types compiles as before. ``tests/core/test_aot.py`` checks that
 the live path calls nothing else and that each signature is the one numba infers.
 """
 
