@@ -691,6 +691,20 @@ def latency_run(port: int, seconds: float, warm_s: float, rate: float = 1000.0, 
             "other": dict(other)}
 
 
+def latency_rows(label: str, res: dict, e50: float, e99: float, note: str, max_note: str) -> list[dict]:
+    """The p50, p99 and max rows of one latency run against the echo's p50 and p99."""
+    rows = []
+    for q, eq in ((50, e50), (99, e99)):
+        v = percentile(res["client_ms"], q)
+        goal = f"p99 <= 1 ms: {_verdict(v <= GOAL_LATENCY_P99_MS)}" if q == 99 else None
+        rows.append(_row(f"{label}, p{q}", samples=len(res["client_ms"]), value=f"{v:.3f} ms",
+                         ratio=v / eq if eq > 0 else None, baseline=f"Python UDP echo p{q} {eq:.3f} ms", goal=goal,
+                         note=f"{note}kernel stamps: {percentile(res['kernel_ms'], q):.3f} ms"))
+    top = float(np.max(res["client_ms"])) if len(res["client_ms"]) else float("nan")
+    rows.append(_row(f"{label}, max", samples=len(res["client_ms"]), value=f"{top:.3f} ms", note=max_note))
+    return rows
+
+
 def latency_service(seconds: float, gnss_hz: float = 0.0) -> dict:
     """Latency of ``mavins run --rate 1000 --samples 1`` (filter on: GNSS at ``gnss_hz``, when > 0); the
     service's exit counters in ``counters``."""
@@ -1510,29 +1524,13 @@ def main(argv: Sequence[str] = ()) -> list[dict]:
             log(f"latency: mavins run --rate 1000 --samples 1, 1 kHz, {args.latency_seconds:g} s")
             lat = latency_service(args.latency_seconds)
             e50, e99 = percentile(echo["client_ms"], 50), percentile(echo["client_ms"], 99)
-            for q, eq in ((50, e50), (99, e99)):
-                v = percentile(lat["client_ms"], q)
-                goal = f"p99 <= 1 ms: {_verdict(v <= GOAL_LATENCY_P99_MS)}" if q == 99 else None
-                rows.append(_row(f"latency IMU in -> ATTITUDE out, p{q}", samples=len(lat["client_ms"]),
-                                 value=f"{v:.3f} ms", ratio=v / eq if eq > 0 else None,
-                                 baseline=f"Python UDP echo p{q} {eq:.3f} ms", goal=goal,
-                                 note=f"1 kHz, kernel stamps: {percentile(lat['kernel_ms'], q):.3f} ms"))
-            rows.append(_row("latency IMU in -> ATTITUDE out, max", samples=len(lat["client_ms"]),
-                             value=f"{float(np.max(lat['client_ms'])) if len(lat['client_ms']) else float('nan'):.3f} ms",
-                             note=f"echo max {float(np.max(echo['client_ms'])):.3f} ms"))
+            rows += latency_rows("latency IMU in -> ATTITUDE out", lat, e50, e99, "1 kHz, ",
+                                 f"echo max {float(np.max(echo['client_ms'])):.3f} ms")
             log(f"latency with the filter on: GPS_RAW_INT at {GNSS_HZ:g} Hz too, {args.latency_seconds:g} s")
             flt = latency_service(args.latency_seconds, gnss_hz=GNSS_HZ)
             fixes = flt["counters"].get("gnss_pos_accepted", 0)
-            for q, eq in ((50, e50), (99, e99)):
-                v = percentile(flt["client_ms"], q)
-                goal = f"p99 <= 1 ms: {_verdict(v <= GOAL_LATENCY_P99_MS)}" if q == 99 else None
-                rows.append(_row(f"latency, filter on (GNSS {GNSS_HZ:g} Hz), p{q}", samples=len(flt["client_ms"]),
-                                 value=f"{v:.3f} ms", ratio=v / eq if eq > 0 else None,
-                                 baseline=f"Python UDP echo p{q} {eq:.3f} ms", goal=goal,
-                                 note=f"kernel stamps: {percentile(flt['kernel_ms'], q):.3f} ms; {fixes} fixes fused"))
-            rows.append(_row(f"latency, filter on (GNSS {GNSS_HZ:g} Hz), max", samples=len(flt["client_ms"]),
-                             value=f"{float(np.max(flt['client_ms'])) if len(flt['client_ms']) else float('nan'):.3f} ms",
-                             note=f"p99.9 {percentile(flt['client_ms'], 99.9):.3f} ms"))
+            rows += latency_rows(f"latency, filter on (GNSS {GNSS_HZ:g} Hz)", flt, e50, e99, f"{fixes} fixes fused; ",
+                                 f"p99.9 {percentile(flt['client_ms'], 99.9):.3f} ms")
             rows.append(_row("CPU at 1 kHz in, 1 kHz out, filter on", value=f"{flt['cpu_pct']:.1f} % of a core",
                              goal=f"<= 25 %: {_verdict(flt['cpu_pct'] <= 25.0)}",
                              note="over the latency run (one output set per sample)"))

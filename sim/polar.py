@@ -29,7 +29,7 @@ import numpy as np
 
 from mavins.core import earth
 from mavins.core.jit import kernel
-from mavins.core.rotation import dcm_to_euler, dcm_to_quat, euler_to_dcm
+from mavins.core.rotation import dcm_to_euler, dcm_to_quat, euler_to_dcm, mat_mul, mat_vec
 
 from .kinematics import GL_NODES, GL_WEIGHTS
 
@@ -124,8 +124,8 @@ def _ned_rows(lat: np.ndarray, lon: np.ndarray, v_e: np.ndarray, c_be: np.ndarra
     ``C_e^n = C_n^e(lat, lon)^T`` (earth.cne_from_latlon)."""
     for i in range(lat.shape[0]):
         c_en = earth.cne_from_latlon(lat[i], lon[i]).T
-        out[i, 0:3] = c_en @ v_e[i]
-        c_bn = c_en @ c_be[i]
+        out[i, 0:3] = mat_vec(c_en, v_e[i])
+        c_bn = mat_mul(c_en, c_be[i])
         out[i, 3:6] = dcm_to_euler(c_bn)
         out[i, 6:10] = dcm_to_quat(c_bn)
 

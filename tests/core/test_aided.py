@@ -897,3 +897,46 @@ def test_a_rejected_measurement_leaves_no_trace() -> None:
     near = [0.055, lat0 + 0.5 / RN, lon0, H0, 0.0, 0.0, 0.0, 1.0, 1.0, 0.1]
     moved = run_direct(imu(), P=P.copy(), predict_every=3, gnss=[good, near])
     assert not np.array_equal(moved[1], ref[1])
+
+
+def test_apply_gnss_reports_each_part_of_a_fix() -> None:
+    """aided.apply_gnss on a level vehicle at rest at the fix's position: position and velocity accepted (3 rows
+    each, zero innovation); an empty down velocity gives 2 rows; a fix 1 km off fails the gate and its
+    velocity is left out (GLITCH) with P untouched by it; a fix without a position still fuses its velocity;
+    nothing finite: ABSENT twice, nothing changed."""
+    cfg = sd.make_config()
+    lat, lon = math.radians(LAT0), math.radians(LON0)
+
+    def fresh():
+        s = sd.init_state(0.0, lat, lon, H0, np.zeros(3), 0.0, 0.0, 0.0)
+        return s, np.zeros(kf.B_SIZE), np.diag([1e-4] * 3 + [1.0] * 3 + [1e-12, 1e-12, 1.0] + [1e-6] * (em.NX - 9))
+
+    def fix(s, bias, P, la, lo, h, v):
+        return aided.apply_gnss(s, cfg, bias, P, la, lo, h, np.asarray(v, float), np.zeros(3), np.zeros(3), 0.0,
+                                0.01, 1.0, 1.0, 0.1, 5.0, kf.ALL)
+
+    s, bias, P = fresh()
+    ps, pr, pnis, _, vs, vr, vnis, _ = fix(s, bias, P, lat, lon, H0, [0.0, 0.0, 0.0])
+    assert (ps, pr, vs, vr) == (aided.ACCEPTED, 3, aided.ACCEPTED, 3) and pnis < 1e-12 and vnis < 1e-12
+    s, bias, P = fresh()
+    assert fix(s, bias, P, lat, lon, H0, [0.0, 0.0, math.nan])[4:6] == (aided.ACCEPTED, 2)
+    s, bias, P = fresh()
+    P0 = P.copy()
+    far = lat + 1000.0 / A  # ~1 km north: 1000 sigma
+    ps, _, _, _, vs, vr, _, _ = fix(s, bias, P, far, lon, H0, [0.0, 0.0, 0.0])
+    assert (ps, vs, vr) == (aided.REJECTED, aided.GLITCH, 0)
+    np.testing.assert_array_equal(P, P0)
+    s, bias, P = fresh()
+    ps, pr, _, _, vs, vr, _, _ = fix(s, bias, P, math.nan, lon, H0, [0.0, 0.0, 0.0])
+    assert (ps, pr, vs, vr) == (aided.ABSENT, 0, aided.ACCEPTED, 3)
+    s, bias, P = fresh()
+    s0, P0 = s.copy(), P.copy()
+    assert fix(s, bias, P, math.nan, math.nan, math.nan, [math.nan] * 3)[::4] == (aided.ABSENT, aided.ABSENT)
+    np.testing.assert_array_equal(s, s0)
+    np.testing.assert_array_equal(P, P0)
+
+
+def test_mag_stats_start_empty_with_the_hard_iron_variance() -> None:
+    P = np.diag(np.arange(1.0, em.NX + 1.0))
+    incl = aided.mag_stats(P)
+    assert incl.shape == (kf.MAG_STATS,) and not incl[:4].any() and incl[4] == P[em.X_MB, em.X_MB] == em.X_MB + 1.0

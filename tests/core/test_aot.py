@@ -111,3 +111,10 @@ def test_mavins_nav_on_an_empty_cache_compiles_nothing_and_writes_the_jits_bytes
             outputs[flag] = out.read_bytes()
         assert not list(cache.rglob("*.nbi")), sorted(p.name for p in cache.rglob("*.nbi"))
         assert outputs["1"] == outputs["0"] and outputs["1"].count(b"\n") > 1000
+
+
+def test_each_export_has_its_own_symbol() -> None:
+    """Two signatures of one kernel (aot.Export.variant) build to two functions: no symbol is used twice."""
+    symbols = [e.symbol for _, e in _exports()]
+    assert len(symbols) == len(set(symbols))
+    assert any(e.variant for _, e in _exports())

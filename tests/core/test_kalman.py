@@ -997,3 +997,33 @@ def test_the_state_is_declared_once() -> None:
         assert getattr(em, f"X_{b.name}") == em.OFFSET[b.name]
         if b.sensor:
             assert getattr(kf, f"B_{b.name}") == em.OFFSET[b.name] - em.X_SENSORS
+
+
+def test_calibrated_gyro_bias_sets_the_estimate_and_an_uncorrelated_variance() -> None:
+    """A zero-rate calibration: the constant gyro bias takes the measured value, its rows and columns of P are
+    cleared and the diagonal set to the given variance; the rest of P (and the Gauss-Markov part) stays; a
+    variance of 0 leaves P as it was."""
+    rng = np.random.default_rng(3)
+    a = rng.normal(size=(em.NX, em.NX))
+    P = a @ a.T
+    P0 = P.copy()
+    bias = np.zeros(kf.B_SIZE)
+    bias[kf.B_GG:kf.B_GG + 3] = (1e-5, 2e-5, 3e-5)
+    kf.calibrated_gyro_bias(P, bias, np.array([1e-4, -2e-4, 3e-4]), 4e-10)
+    g = slice(em.X_BG, em.X_BG + 3)
+    np.testing.assert_array_equal(bias[kf.B_BG:kf.B_BG + 3], [1e-4, -2e-4, 3e-4])
+    np.testing.assert_array_equal(kf.gyro_bias_total(bias), np.array([1e-4, -2e-4, 3e-4]) + [1e-5, 2e-5, 3e-5])
+    np.testing.assert_array_equal(P[g, g], 4e-10 * np.eye(3))
+    others = np.r_[0:em.X_BG, em.X_BG + 3:em.NX]
+    assert not P[g][:, others].any() and not P[others][:, g].any()
+    np.testing.assert_array_equal(P[np.ix_(others, others)], P0[np.ix_(others, others)])
+    P1 = P0.copy()
+    kf.calibrated_gyro_bias(P1, bias, np.zeros(3), 0.0)
+    np.testing.assert_array_equal(P1, P0)
+
+
+def test_bias_totals_add_the_constant_and_gauss_markov_parts() -> None:
+    bias = np.arange(1.0, kf.B_SIZE + 1.0)
+    np.testing.assert_array_equal(kf.gyro_bias_total(bias), bias[kf.B_BG:kf.B_BG + 3] + bias[kf.B_GG:kf.B_GG + 3])
+    np.testing.assert_array_equal(kf.accel_bias_total(bias), bias[kf.B_BA:kf.B_BA + 3] + bias[kf.B_GA:kf.B_GA + 3])
+    assert kf.B_BG != kf.B_GG and kf.B_BA != kf.B_GA
