@@ -48,9 +48,29 @@ GL_NODES, GL_WEIGHTS = gauss_legendre(5)
 @kernel
 def channel_eval(starts: np.ndarray, durs: np.ndarray, coefs: np.ndarray, count: int, t: float) -> tuple[float, float]:
     """Value and rate of one channel at time t (held constant-rate beyond its ends)."""
+    return channel_at(starts, durs, coefs, piece_index(starts, count, t), t)
+
+
+@kernel
+def piece_index(starts: np.ndarray, count: int, t: float) -> int:
+    """The piece of a channel (of ``count`` pieces starting at ``starts``) that holds t: the last one starting
+    at or before t (the first before its start)."""
     k = np.searchsorted(starts[:count], t, side="right") - 1
-    if k < 0:
-        k = 0
+    return k if k > 0 else 0
+
+
+@kernel
+def pieces_at(starts: np.ndarray, counts: np.ndarray, t: float, out: np.ndarray) -> None:
+    """piece_index of every channel at t into ``out`` (N_CHANNELS integers)."""
+    for c in range(N_CHANNELS):
+        out[c] = piece_index(starts[c], counts[c], t)
+
+
+@kernel
+def channel_at(starts: np.ndarray, durs: np.ndarray, coefs: np.ndarray, k: int, t: float) -> tuple[float, float]:
+    """Value and rate at t of piece k of a channel: its polynomial of degree <= 6 in ``u = (t - start) / dur``
+    (Horner), continued with the end value and rate beyond u = 1 and linearly before u = 0. Inside a
+    sample interval, split at every channel's breaks, the piece of each channel is known once (pieces_at)."""
     d = durs[k]
     u = (t - starts[k]) / d
     c = coefs[k]
@@ -163,18 +183,18 @@ def vib_sums(t: float, vib: np.ndarray, linvib: np.ndarray, out: np.ndarray) -> 
 
 
 @kernel
-def vehicle_s(t: float, starts: np.ndarray, durs: np.ndarray, coefs: np.ndarray, counts: np.ndarray, vs: np.ndarray
+def vehicle_s(t: float, starts: np.ndarray, durs: np.ndarray, coefs: np.ndarray, pieces: np.ndarray, vs: np.ndarray
               ) -> tuple[float, float, float, float, float, float, float, float, float, float, float, float]:
     """Vehicle roll, pitch, yaw (rad), their rates (rad/s), NED velocity (m/s) and acceleration
     (m/s^2) at t, the linear vibration's from ``vs`` (VS_VEL, VS_ACC) added.
 
     ``v = [V cos psi, V sin psi, v_D]``, ``a = [V' cos psi - V psi' sin psi, V' sin psi + V psi' cos psi, v_D']``.
     """
-    r, rd = channel_eval(starts[CH_ROLL], durs[CH_ROLL], coefs[CH_ROLL], counts[CH_ROLL], t)
-    p, pd = channel_eval(starts[CH_PITCH], durs[CH_PITCH], coefs[CH_PITCH], counts[CH_PITCH], t)
-    y, yd = channel_eval(starts[CH_YAW], durs[CH_YAW], coefs[CH_YAW], counts[CH_YAW], t)
-    spd, spd_d = channel_eval(starts[CH_SPEED], durs[CH_SPEED], coefs[CH_SPEED], counts[CH_SPEED], t)
-    vd, vd_d = channel_eval(starts[CH_VD], durs[CH_VD], coefs[CH_VD], counts[CH_VD], t)
+    r, rd = channel_at(starts[CH_ROLL], durs[CH_ROLL], coefs[CH_ROLL], pieces[CH_ROLL], t)
+    p, pd = channel_at(starts[CH_PITCH], durs[CH_PITCH], coefs[CH_PITCH], pieces[CH_PITCH], t)
+    y, yd = channel_at(starts[CH_YAW], durs[CH_YAW], coefs[CH_YAW], pieces[CH_YAW], t)
+    spd, spd_d = channel_at(starts[CH_SPEED], durs[CH_SPEED], coefs[CH_SPEED], pieces[CH_SPEED], t)
+    vd, vd_d = channel_at(starts[CH_VD], durs[CH_VD], coefs[CH_VD], pieces[CH_VD], t)
     cy, sy = np.cos(y), np.sin(y)
     return (r, p, y, rd, pd, yd,
             spd * cy + vs[VS_VEL], spd * sy + vs[VS_VEL + 1], vd + vs[VS_VEL + 2],
@@ -208,11 +228,14 @@ def perturbation_s(t: float, vs: np.ndarray, consts: np.ndarray) -> tuple[Mat9, 
 
 
 @kernel
-def turntable_s(t: float, starts: np.ndarray, durs: np.ndarray, coefs: np.ndarray, counts: np.ndarray
+def turntable_s(t: float, starts: np.ndarray, durs: np.ndarray, coefs: np.ndarray, pieces: np.ndarray
                 ) -> tuple[Mat9, float, float, float, float, float]:
-    """``C_s^v = Rz(a1) Rx(a2)`` (9-tuple), the IMU's rate relative to the vehicle (in s), angles a1, a2."""
-    a1, r1 = channel_eval(starts[CH_TT1], durs[CH_TT1], coefs[CH_TT1], counts[CH_TT1], t)
-    a2, r2 = channel_eval(starts[CH_TT2], durs[CH_TT2], coefs[CH_TT2], counts[CH_TT2], t)
+    """``C_s^v = Rz(a1) Rx(a2)`` (9-tuple), the IMU's rate relative to the vehicle (in s), angles a1, a2.
+    No turntable (both channels' pieces zero, as in every scenario without one): the identity, at once."""
+    if not (coefs[CH_TT1, pieces[CH_TT1]].any() or coefs[CH_TT2, pieces[CH_TT2]].any()):
+        return (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0), 0.0, 0.0, 0.0, 0.0, 0.0
+    a1, r1 = channel_at(starts[CH_TT1], durs[CH_TT1], coefs[CH_TT1], pieces[CH_TT1], t)
+    a2, r2 = channel_at(starts[CH_TT2], durs[CH_TT2], coefs[CH_TT2], pieces[CH_TT2], t)
     # rate of Rz(a1) Rx(a2) in s: Rx(a2)^T [0, 0, r1] + [r2, 0, 0]
     return euler_to_dcm_s(a2, 0.0, a1), r2, np.sin(a2) * r1, np.cos(a2) * r1, a1, a2
 
@@ -234,19 +257,21 @@ def imu_rates(
     """True ``w_is^s`` (rad/s) and ``f^s`` (m/s^2) of the IMU at t, latitude, height (rates_s)."""
     vs = np.empty(VS_SIZE)
     vib_sums(t, vib, linvib, vs)
-    r = rates_s(t, lat, h, starts, durs, coefs, counts, vs, consts, use_earth)
+    pieces = np.empty(N_CHANNELS, dtype=np.int64)
+    pieces_at(starts, counts, t, pieces)
+    r = rates_s(t, lat, h, starts, durs, coefs, pieces, vs, consts, use_earth)
     return np.array([r[0], r[1], r[2]]), np.array([r[3], r[4], r[5]])
 
 
 @kernel
 def rates_s(
-    t: float, lat: float, h: float, starts: np.ndarray, durs: np.ndarray, coefs: np.ndarray, counts: np.ndarray,
+    t: float, lat: float, h: float, starts: np.ndarray, durs: np.ndarray, coefs: np.ndarray, pieces: np.ndarray,
     vs: np.ndarray, consts: np.ndarray, use_earth: bool,
 ) -> tuple[float, float, float, float, float, float]:
     """``w_is^s`` and ``f^s`` at t given the vibration sums ``vs`` there ([TW11] 11.1, inverted):
     ``w_iv = w_nv + C_n^v (w_ie + w_en)``, ``f^v = C_n^v (a + (2 w_ie + w_en) x v - g)``, then
     through the perturbation and the turntable. Allocation-free (tuples)."""
-    r, p, y, rd, pd, yd, vn, ve, vd, an, ae, ad = vehicle_s(t, starts, durs, coefs, counts, vs)
+    r, p, y, rd, pd, yd, vn, ve, vd, an, ae, ad = vehicle_s(t, starts, durs, coefs, pieces, vs)
     c_vn = euler_to_dcm_s(r, p, y)
     sr, cr = np.sin(r), np.cos(r)
     sp, cp = np.sin(p), np.cos(p)
@@ -267,7 +292,7 @@ def rates_s(
     c_pv, wpx, wpy, wpz = perturbation_s(t, vs, consts)
     wx, wy, wz = mat3t_vec_s(c_pv, wvx, wvy, wvz)
     fx, fy, fz = mat3t_vec_s(c_pv, fx, fy, fz)
-    c_sp, wtx, wty, wtz, _, _ = turntable_s(t, starts, durs, coefs, counts)
+    c_sp, wtx, wty, wtz, _, _ = turntable_s(t, starts, durs, coefs, pieces)
     wx, wy, wz = mat3t_vec_s(c_sp, wx + wpx, wy + wpy, wz + wpz)
     fx, fy, fz = mat3t_vec_s(c_sp, fx, fy, fz)
     return wx + wtx, wy + wty, wz + wtz, fx, fy, fz
@@ -410,7 +435,8 @@ def integrate(
     acc_th = np.empty(3)
     acc_v = np.empty(3)
     vs_rk = np.zeros(VS_SIZE)
-    pieces = 0
+    pieces = np.empty(N_CHANNELS, dtype=np.int64)
+    n_pieces = 0  # pieces integrated (phasors re-anchored every ANCHOR_EVERY)
     for i in range(t.shape[0]):
         ti = t[i]
         k0 = np.searchsorted(breaks, tp, side="right")
@@ -441,25 +467,26 @@ def integrate(
             node_vs[:] = 0.0
             end_vs[:] = 0.0
             ends[:] = 0.0
-            anchor = pieces % ANCHOR_EVERY == 0
+            anchor = n_pieces % ANCHOR_EVERY == 0
+            pieces_at(starts, counts, 0.5 * (ta0 + edges[piece + 1]), pieces)  # each channel's piece in here
             _piece_sums(ta0, anchor, substeps, vib, terms_a, ANGULAR_ROWS, step_a[slot], rot_a[slot], carry_a,
                         pc_a, ps_a, node_vs, end_vs)
             _piece_sums(ta0, anchor, substeps, linvib, terms_l, LINEAR_ROWS, step_l[slot], rot_l[slot], carry_l,
                         pc_l, ps_l, node_vs, end_vs)
             for j in range(substeps + 1):  # the linear vibration's velocity and displacement at the boundaries
                 _sine_sum(terms_l, DISPLACEMENT_ROWS, pc_l[j], ps_l[j], step_l[slot, 2], step_l[slot, 3], ends, j)
-            pieces += 1
+            n_pieces += 1
             for j in range(substeps):
                 ta = ta0 + j * hstep
                 hh = 0.5 * hstep
                 # classical RK4 on the smooth velocity, the vibration's displacement added exactly
-                k1 = pos_rate_s(ta, lat, lon, h, starts, durs, coefs, counts, vs_rk, use_earth)
+                k1 = pos_rate_s(ta, lat, lon, h, starts, durs, coefs, pieces, vs_rk, use_earth)
                 k2 = pos_rate_s(ta + hh, lat + hh * k1[0], lon + hh * k1[1], h + hh * k1[2], starts, durs, coefs,
-                                counts, vs_rk, use_earth)
+                                pieces, vs_rk, use_earth)
                 k3 = pos_rate_s(ta + hh, lat + hh * k2[0], lon + hh * k2[1], h + hh * k2[2], starts, durs, coefs,
-                                counts, vs_rk, use_earth)
+                                pieces, vs_rk, use_earth)
                 k4 = pos_rate_s(ta + hstep, lat + hstep * k3[0], lon + hstep * k3[1], h + hstep * k3[2], starts, durs,
-                                coefs, counts, vs_rk, use_earth)
+                                coefs, pieces, vs_rk, use_earth)
                 sx, sy, sz = pos_scale_s(lat, h, use_earth)
                 h6 = hstep / 6.0
                 lat1 = lat + h6 * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0]) + sx * (ends[j + 1, 3] - ends[j, 3])
@@ -468,7 +495,7 @@ def integrate(
                 # Hermite end slopes: the full velocity (smooth + vibration) at both ends
                 s0x, s0z = k1[0] + sx * ends[j, 0], k1[2] + sz * ends[j, 2]
                 vs_rk[VS_VEL:VS_VEL + 3] = ends[j + 1, 0:3]
-                m1 = pos_rate_s(ta + hstep, lat1, lon1, h1, starts, durs, coefs, counts, vs_rk, use_earth)
+                m1 = pos_rate_s(ta + hstep, lat1, lon1, h1, starts, durs, coefs, pieces, vs_rk, use_earth)
                 vs_rk[VS_VEL:VS_VEL + 3] = 0.0
                 for g in range(ng):
                     x = nodes[g]
@@ -478,7 +505,7 @@ def integrate(
                     h11 = x**3 - x**2
                     latn = h00 * lat + h10 * hstep * s0x + h01 * lat1 + h11 * hstep * m1[0]
                     hn = h00 * h + h10 * hstep * s0z + h01 * h1 + h11 * hstep * m1[2]
-                    r = rates_s(ta + x * hstep, latn, hn, starts, durs, coefs, counts, node_vs[j * ng + g], consts,
+                    r = rates_s(ta + x * hstep, latn, hn, starts, durs, coefs, pieces, node_vs[j * ng + g], consts,
                                 use_earth)
                     wq = weights[g] * hstep
                     acc_th[0] += wq * r[0]
@@ -493,7 +520,8 @@ def integrate(
         pos[i, 0] = lat
         pos[i, 1] = lon
         pos[i, 2] = h
-        truth_row(ti, starts, durs, coefs, counts, end_vs[0], consts, rows[i])
+        pieces_at(starts, counts, ti, pieces)
+        truth_row(ti, starts, durs, coefs, pieces, end_vs[0], consts, rows[i])
         tp = ti
 
 
@@ -508,10 +536,10 @@ def pos_scale_s(lat: float, h: float, use_earth: bool) -> tuple[float, float, fl
 
 @kernel
 def pos_rate_s(t: float, lat: float, lon: float, h: float, starts: np.ndarray, durs: np.ndarray, coefs: np.ndarray,
-               counts: np.ndarray, vs: np.ndarray, use_earth: bool) -> tuple[float, float, float]:
+               pieces: np.ndarray, vs: np.ndarray, use_earth: bool) -> tuple[float, float, float]:
     """Rate of (lat, lon, h) (or flat north, east, up) at t: ``L' = v_N/(R_N+h)``,
     ``lon' = v_E/((R_E+h) cos L)``, ``h' = -v_D`` (linear vibration from ``vs``)."""
-    v = vehicle_s(t, starts, durs, coefs, counts, vs)
+    v = vehicle_s(t, starts, durs, coefs, pieces, vs)
     sx, sy, sz = pos_scale_s(lat, h, use_earth)
     return v[6] * sx, v[7] * sy, v[8] * sz
 
@@ -530,13 +558,15 @@ def truth(
 ) -> None:
     """truth_row at each t (the vibration sums evaluated directly)."""
     vs = np.empty(VS_SIZE)
+    pieces = np.empty(N_CHANNELS, dtype=np.int64)
     for i in range(t.shape[0]):
         vib_sums(t[i], vib, linvib, vs)
-        truth_row(t[i], starts, durs, coefs, counts, vs, consts, out[i])
+        pieces_at(starts, counts, t[i], pieces)
+        truth_row(t[i], starts, durs, coefs, pieces, vs, consts, out[i])
 
 
 @kernel
-def truth_row(t: float, starts: np.ndarray, durs: np.ndarray, coefs: np.ndarray, counts: np.ndarray, vs: np.ndarray,
+def truth_row(t: float, starts: np.ndarray, durs: np.ndarray, coefs: np.ndarray, pieces: np.ndarray, vs: np.ndarray,
               consts: np.ndarray, out: np.ndarray) -> None:
     """True velocity and attitudes at t: ``vn, ve, vd, q_ns[4], q_nv[4], a1, a2`` (vibration sums ``vs``).
 
@@ -544,9 +574,9 @@ def truth_row(t: float, starts: np.ndarray, durs: np.ndarray, coefs: np.ndarray,
     ``q_nv`` the vehicle's (angular vibration and coning included), a1/a2 the
     turntable angles (rad).
     """
-    r, p, y, _, _, _, vn, ve, vd, _, _, _ = vehicle_s(t, starts, durs, coefs, counts, vs)
+    r, p, y, _, _, _, vn, ve, vd, _, _, _ = vehicle_s(t, starts, durs, coefs, pieces, vs)
     c_pv, _, _, _ = perturbation_s(t, vs, consts)
-    c_sp, _, _, _, a1, a2 = turntable_s(t, starts, durs, coefs, counts)
+    c_sp, _, _, _, a1, a2 = turntable_s(t, starts, durs, coefs, pieces)
     c_nv = mat3_mul_s(euler_to_dcm_s(r, p, y), c_pv)
     out[0], out[1], out[2] = vn, ve, vd
     out[3], out[4], out[5], out[6] = dcm_to_quat_s(mat3_mul_s(c_nv, c_sp))
