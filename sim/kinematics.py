@@ -52,6 +52,14 @@ def channel_eval(starts: np.ndarray, durs: np.ndarray, coefs: np.ndarray, count:
 
 
 @kernel
+def channel_values(starts: np.ndarray, durs: np.ndarray, coefs: np.ndarray, count: int, t: np.ndarray,
+                   out: np.ndarray) -> None:
+    """channel_eval's value at each of the times t into ``out``."""
+    for i in range(t.shape[0]):
+        out[i] = channel_eval(starts, durs, coefs, count, t[i])[0]
+
+
+@kernel
 def piece_index(starts: np.ndarray, count: int, t: float) -> int:
     """The piece of a channel (of ``count`` pieces starting at ``starts``) that holds t: the last one starting
     at or before t (the first before its start)."""

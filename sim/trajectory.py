@@ -65,9 +65,9 @@ class Channel:
     def eval(self, t: np.ndarray) -> np.ndarray:
         """Value at times t (numpy; for planning, not for the increments)."""
         starts, durs, coefs = self.arrays()
-        out = np.empty_like(t, dtype=float)
-        for i, ti in enumerate(np.atleast_1d(t)):
-            out[i] = kin.channel_eval(starts, durs, coefs, len(starts), float(ti))[0]
+        ts = np.ascontiguousarray(np.atleast_1d(t), dtype=float)
+        out = np.empty_like(ts)
+        kin.channel_values(starts, durs, coefs, len(starts), ts, out)
         return out
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
