@@ -259,7 +259,8 @@ def apply_gnss(s: np.ndarray, cfg: np.ndarray, bias: np.ndarray, P: np.ndarray, 
     T with the body rate w_ib; only its horizontal rows when the down component is NaN, as GPS_RAW_INT's
     ground speed and course give: kalman.horizontal_rows). A fix whose position fails the gate is a glitch:
     its velocity is left out too (status GLITCH). Returns, for the position then the velocity,
-    ``(status, rows, nis, ratio)``: status ACCEPTED, REJECTED, ABSENT or GLITCH."""
+    ``(status, rows, nis, ratio)``: status ACCEPTED, REJECTED, ABSENT or GLITCH (rows, nis and ratio 0
+    for a part not applied)."""
     ps, pr, pnis, pratio = ABSENT, 0, 0.0, 0.0
     if np.isfinite(lat) and np.isfinite(lon) and np.isfinite(h):
         nu, H, R = kf.gnss_position(s, cfg, lat, lon, h, lever, late, sig_h, sig_v)

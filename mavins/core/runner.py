@@ -42,8 +42,7 @@ def to_file_units(rows: np.ndarray, copy: bool = True) -> np.ndarray:
     """Kernel solution rows (radians) to file units (degrees for lat, lon, Euler); ``copy=False``
     converts ``rows`` in place (a buffer of the caller's own)."""
     out = rows.copy() if copy else rows
-    if out.shape[0]:
-        degrees_in_place(out, DEGREE_COLUMNS)
+    degrees_in_place(out, DEGREE_COLUMNS)
     return out
 
 

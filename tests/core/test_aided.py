@@ -923,15 +923,15 @@ def test_apply_gnss_reports_each_part_of_a_fix() -> None:
     s, bias, P = fresh()
     P0 = P.copy()
     far = lat + 1000.0 / A  # ~1 km north: 1000 sigma
-    ps, _, _, _, vs, vr, _, _ = fix(s, bias, P, far, lon, H0, [0.0, 0.0, 0.0])
-    assert (ps, vs, vr) == (aided.REJECTED, aided.GLITCH, 0)
+    ps, _, _, _, vs, vr, vnis, vratio = fix(s, bias, P, far, lon, H0, [0.0, 0.0, 0.0])
+    assert (ps, vs, vr, vnis, vratio) == (aided.REJECTED, aided.GLITCH, 0, 0.0, 0.0)
     np.testing.assert_array_equal(P, P0)
     s, bias, P = fresh()
     ps, pr, _, _, vs, vr, _, _ = fix(s, bias, P, math.nan, lon, H0, [0.0, 0.0, 0.0])
     assert (ps, pr, vs, vr) == (aided.ABSENT, 0, aided.ACCEPTED, 3)
     s, bias, P = fresh()
     s0, P0 = s.copy(), P.copy()
-    assert fix(s, bias, P, math.nan, math.nan, math.nan, [math.nan] * 3)[::4] == (aided.ABSENT, aided.ABSENT)
+    assert fix(s, bias, P, math.nan, math.nan, math.nan, [math.nan] * 3) == (aided.ABSENT, 0, 0.0, 0.0) * 2
     np.testing.assert_array_equal(s, s0)
     np.testing.assert_array_equal(P, P0)
 

@@ -129,3 +129,18 @@ def test_navigate_refuses_an_unknown_kind_of_data() -> None:
     with pytest.raises(ValueError) as e:
         runner.navigate(t, dth, dv, INIT, data="counts")
     assert str(e.value) == "data must be increments or rates, got 'counts'"
+
+
+def test_to_file_units_converts_a_buffer_of_the_callers_own_in_place() -> None:
+    """copy=False converts the very array given (the kernel's output buffer: no second 56 MB per million
+    samples) and returns it; the default leaves its input as it was; no rows, nothing to do."""
+    rows = np.tile(np.radians(np.arange(14.0)), (3, 1))
+    before = rows.copy()
+    out = runner.to_file_units(rows)
+    np.testing.assert_array_equal(rows, before)
+    same = runner.to_file_units(rows, copy=False)
+    assert same is rows
+    np.testing.assert_array_equal(rows, out)
+    np.testing.assert_array_equal(rows[:, [1, 2, 7, 8, 9]], np.degrees(before[:, [1, 2, 7, 8, 9]]))
+    np.testing.assert_array_equal(rows[:, [0, 3, 4, 5, 6, 10, 11, 12, 13]], before[:, [0, 3, 4, 5, 6, 10, 11, 12, 13]])
+    assert runner.to_file_units(np.empty((0, 14)), copy=False).shape == (0, 14)
