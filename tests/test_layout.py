@@ -132,3 +132,30 @@ def test_the_rules_catch_a_core_module_importing_the_link(tmp_path: Path) -> Non
     assert room(_resolve("mavins.core.records", modules)) in MAY_IMPORT["link"]
     assert "faces" not in MAY_IMPORT["live"] and "live" not in MAY_IMPORT["sim"]
     assert "core" not in THIRD_PARTY_ONLY_IN["rerun"]
+
+
+def _kernel_linear_algebra(path: Path) -> list[str]:
+    """``@`` products and np.dot / np.linalg calls inside the @kernel / @sum_kernel functions of a file."""
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if not isinstance(node, ast.FunctionDef):
+            continue
+        if not any(isinstance(d, ast.Name) and d.id in ("kernel", "sum_kernel") for d in node.decorator_list):
+            continue
+        for sub in ast.walk(node):
+            if isinstance(sub, ast.BinOp) and isinstance(sub.op, ast.MatMult):
+                found.append(f"{path.name}:{sub.lineno} {node.name}: @")
+            elif isinstance(sub, ast.Attribute) and sub.attr in ("dot", "linalg") and \
+                    isinstance(sub.value, ast.Name) and sub.value.id == "np":
+                found.append(f"{path.name}:{sub.lineno} {node.name}: np.{sub.attr}")
+    return found
+
+
+def test_no_kernel_uses_numbas_linear_algebra(tmp_path: Path) -> None:
+    """numba's np.dot, ``@`` and np.linalg need SciPy, which an install does not have: a kernel using
+    them fails the build of the kernels on a fresh machine (DEVELOPERS.md). The checker sees one."""
+    bad = [hit for p in _modules().values() for hit in _kernel_linear_algebra(p)]
+    assert not bad, f"kernels using numba's linear algebra (write the loop): {bad}"
+    probe = tmp_path / "probe.py"
+    probe.write_text("@kernel\ndef f(a, b):\n    return a @ b + np.dot(a, b)\n\ndef g(a, b):\n    return a @ b\n")
+    assert [h.split(" ", 1)[1] for h in _kernel_linear_algebra(probe)] == ["f: @", "f: np.dot"]
