@@ -104,20 +104,15 @@ def generate_chunks(
     g = grade if grade is not None else scenario.grade
     model = errors.grade(g)
     t0 = traj.t0
-    primary = errors.ErrorStream(model, pieces.t, seed, t_start=t0) if pieces.n else None
+    primary = errors.ErrorStream(model, pieces.t, seed, t_start=t0)
     # IMUs 1..imus-1: own error draws (seed + 7919 k), no jitter or drops of their own (one clock samples
     # them all), their faults applied, on the primary's kept rows
     quiet = dataclasses.replace(model, jitter_sigma=0.0, drop_probability=0.0)
-    extras = [errors.ErrorStream(quiet, pieces.t, seed + 7919 * k, t_start=t0) for k in range(1, imus)] \
-        if pieces.n else []
+    extras = [errors.ErrorStream(quiet, pieces.t, seed + 7919 * k, t_start=t0) for k in range(1, imus)]
     fault_streams = [faults.FaultStream(flist, k) for k in range(imus)]
 
     def run() -> Iterator[SimRun]:
         for exact in pieces:
-            if primary is None:
-                empty = np.empty((0, 3))
-                yield SimRun(scenario, hz, g, seed, exact, exact.t, empty, empty, np.ones(0, bool))
-                return
             t, dth, dv, kept = primary.corrupt(exact.dtheta, exact.dv)
             begin = np.concatenate(([exact.t0], exact.t[:-1]))[kept]
             end = exact.t[kept]

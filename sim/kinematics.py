@@ -289,7 +289,7 @@ def rates_s(
     wnz = -pd * sr + yd * cr * cp
     if use_earth:
         kn, ke, kt, ien, ied, g = earth.nav_terms(lat, h)
-        enx, eny, enz = ve * ke, -vn * kn, -ve * kt  # earth.transport_rate_s
+        enx, eny, enz = earth.transport_rate_k(kn, ke, kt, vn, ve)
     else:
         ien, ied, g = 0.0, 0.0, consts[K_GLAB]
         enx, eny, enz = 0.0, 0.0, 0.0

@@ -455,11 +455,13 @@ def simulate(
     :func:`simulate_chunks` and joined.
     """
     parts = simulate_chunks(traj, rate, duration, substeps, usec_grid)
+    done = 0
+    out = []
     with Progress("simulate", parts.n) as bar:
-        out = []
         for part in parts:
             out.append(part)
-            bar.update(sum(len(p.t) for p in out))
+            done += len(part.t)
+            bar.update(done)
     return join(out)
 
 

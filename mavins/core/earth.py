@@ -109,6 +109,13 @@ def transport_rate(lat: float, h: float, v: np.ndarray) -> np.ndarray:
 def transport_rate_s(lat: float, h: float, vn: float, ve: float) -> tuple[float, float, float]:
     """:func:`transport_rate` from the north and east velocity (m/s), as a 3-tuple."""
     kn, ke, kt, wn, wd, g = nav_terms(lat, h)
+    return transport_rate_k(kn, ke, kt, vn, ve)
+
+
+@kernel
+def transport_rate_k(kn: float, ke: float, kt: float, vn: float, ve: float) -> tuple[float, float, float]:
+    """:func:`transport_rate` from :func:`nav_terms`' coefficients ``k_N``, ``k_E``, ``k_T`` (1/m) and the
+    north and east velocity (m/s): ``[v_E k_E, -v_N k_N, -v_E k_T]``."""
     return ve * ke, -vn * kn, -ve * kt
 
 

@@ -46,18 +46,19 @@ def cache_is_warm() -> bool:
 def kernel(func: F) -> F:
     """Compile ``func`` in nopython mode with the on-disk cache, taking its entry points built
     ahead of time when there are (:mod:`mavins.core.aot`)."""
-    dispatcher = numba.njit(cache=True, nogil=True, error_model="numpy")(func)
-    if dispatcher is not func:  # not under NUMBA_DISABLE_JIT=1
-        aot.attach(dispatcher)
-    return dispatcher
+    return _compiled_kernel(func, fastmath=False)
 
 
 def sum_kernel(func: F) -> F:
     """:func:`kernel` whose floating-point sums may be reassociated (numba ``fastmath`` reassoc and
     contract), so that a long sum vectorises. Only for sums whose order of terms means nothing beyond
     rounding (a sum of many sinusoids); never for the navigation's recursions."""
-    dispatcher = numba.njit(cache=True, nogil=True, error_model="numpy", fastmath={"reassoc", "contract"})(func)
-    if dispatcher is not func:
+    return _compiled_kernel(func, fastmath={"reassoc", "contract"})
+
+
+def _compiled_kernel(func: F, fastmath: bool | set[str]) -> F:
+    dispatcher = numba.njit(cache=True, nogil=True, error_model="numpy", fastmath=fastmath)(func)
+    if dispatcher is not func:  # not under NUMBA_DISABLE_JIT=1
         aot.attach(dispatcher)
     return dispatcher
 
