@@ -205,7 +205,7 @@ def timesync_reply(mav: mavlink.MAVLink, ts1: int, now_ns: int) -> mavlink.MAVLi
 
 def system_time(mav: mavlink.MAVLink, unix_usec: int, sensor_t: float) -> mavlink.MAVLink_message:
     """SYSTEM_TIME: UTC (us since the UNIX epoch) and the sensor time (ms) it corresponds to."""
-    return mav.system_time_encode(unix_usec, int(sensor_t * 1000.0) % (2**32))
+    return mav.system_time_encode(unix_usec, (int(round(sensor_t * 1e6)) // 1000) % (2**32))  # as encode's stamps
 
 
 def set_gps_global_origin(mav: mavlink.MAVLink, target: int, origin: tuple[float, float, float],

@@ -166,6 +166,7 @@ def test_schuler_oscillation_from_an_accelerometer_bias_strapdown(equator: AtRes
     assert x[int(np.argmin(abs(t - period / 2)))] == pytest.approx(2.0 * amp, rel=0.01)
 
 
+@pytest.mark.plain_python_slow
 def test_schuler_oscillation_from_an_accelerometer_bias_covariance(equator: AtRest) -> None:
     exact = equator
     track = cov.track_means(exact.t0, exact.t, exact.dtheta, exact.dv, exact.truth, int(RATE))
@@ -239,6 +240,7 @@ def flight_short() -> object:
     return load("flight")
 
 
+@pytest.mark.plain_python_slow
 def test_covariance_matches_monte_carlo(flight_short: object) -> None:
     opts = an.AnalysisOptions(runs=MC_RUNS, jobs=2, duration=120.0, rate=50.0, vertical="free", every=1.0)
     spec = cov.spec_from_keys(MC_SPEC)
@@ -255,6 +257,7 @@ def test_covariance_matches_monte_carlo(flight_short: object) -> None:
     assert np.all((ratio > lo) & (ratio < hi)), (lo, hi, ratio)
 
 
+@pytest.mark.plain_python_slow
 def test_jobs_and_dask_cluster_give_identical_numbers(flight_short: object) -> None:
     spec = cov.spec_from_grade("tactical")
     base = an.AnalysisOptions(runs=6, jobs=1, duration=20.0, rate=50.0, seed=7)
@@ -270,6 +273,7 @@ def test_jobs_and_dask_cluster_give_identical_numbers(flight_short: object) -> N
     assert not np.array_equal(one.montecarlo, other_seed.montecarlo)
 
 
+@pytest.mark.plain_python_slow
 def test_budget_sums_to_the_full_propagation(flight_short: object) -> None:
     """The sources' covariances add up to one propagation of all states together (linearity)."""
     spec = cov.spec_from_keys(MC_SPEC | {"gyro_bias_instability": 5.0, "gyro_bias_tau": 100.0,
@@ -387,6 +391,7 @@ MC_HOLD_SPEC = cov.AnalysisSpec(  # gyro and accelerometer with different figure
     accel_misalignment=100.0 * cov.ARCSEC)
 
 
+@pytest.mark.plain_python_slow
 def test_covariance_matches_monte_carlo_with_every_source_and_the_vertical_held(flight_short: object) -> None:
     """``--vertical hold`` with gyro and accelerometer figures that differ, Gauss-Markov instabilities and rate
     random walks: the instability and rate-random-walk sources are not negligible (above 5 % of the total),
