@@ -212,6 +212,10 @@ def _filter_options(g: argparse._ArgumentGroup, with_aiding: bool = True) -> Non
     g.add_argument("--scale-factors", action="store_true",
                    help="estimate the gyro and accelerometer scale factors too, from the grade's figures or the "
                         "spec's gyro_scale/accel_scale (ppm); written as sg_*, sa_* columns (docs/filter.md)")
+    g.add_argument("--misalignment", action="store_true",
+                   help="estimate the gyro and accelerometer misalignments (6 cross-axis terms each) too, from the "
+                        "grade's figure or the spec's gyro_misalignment/accel_misalignment (arcsec); observable only "
+                        "as far as the vehicle turns and tilts; written as mg_*, ma_* columns (docs/filter.md)")
     g.add_argument("--mag-bias", type=_real(0.0, 1e6), default=0.0, metavar="SIGMA",
                    help="estimate the magnetometer's hard iron (body FRD) from this initial 1-sigma per axis: gauss "
                         "for run/replay (as MAVLink carries the field), MAG.csv's unit for nav (default 0: the samples "
@@ -404,7 +408,8 @@ def _cmd_nav(args: argparse.Namespace) -> int:
             rows, counts = run_nav_aided(args.imu[0], args.init, args.output, opts,
                                          AidingFiles(args.gnss, args.baro, args.mag, args.declination,
                                                      tuple(args.rest or ()), args.date, _delays(args),
-                                                     args.mag_bias, args.scale_factors, args.mag_unit),
+                                                     args.mag_bias, args.scale_factors, args.mag_unit,
+                                                     args.misalignment),
                                          _imu_spec(args), args.lever_arm, args.gate)
             for kind, (ok, bad) in counts.items():
                 if ok or bad:
@@ -734,7 +739,8 @@ def _engine_config(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     from .live.livefilter import FilterSettings
 
     flt = FilterSettings(spec=_imu_spec(args), aiding=args.aiding, gate=args.gate, lever_arm=args.lever_arm,
-                         delays=_delays(args), sigma_mag_bias=args.mag_bias, scale_factors=args.scale_factors)
+                         delays=_delays(args), sigma_mag_bias=args.mag_bias, scale_factors=args.scale_factors,
+                         misalignment=args.misalignment)
     from .core.settings import strapdown_from_options
 
     strapdown = strapdown_from_options(args)
@@ -929,6 +935,9 @@ def _add_demo(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scale-factors", action="store_true",
                    help="the service's filter estimates the IMU's scale factors too; the report shows them beside "
                         "the simulated unit's")
+    p.add_argument("--misalignment", action="store_true",
+                   help="the service's filter estimates the IMU's misalignments too; the report shows them beside "
+                        "the simulated unit's (arcsec)")
     p.set_defaults(func=_cmd_demo)
 
 
@@ -963,7 +972,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         report = run_demo(args.scenario, args.duration, speed, args.grade, heading,  # type: ignore[arg-type]
                           None if args.no_rerun else args.rerun, args.rerun_serve, args.seed, stop,
                           aiding=args.aiding, gnss_outage=None if args.no_outage else args.gnss_outage,
-                          scale_factors=args.scale_factors)
+                          scale_factors=args.scale_factors, misalignment=args.misalignment)
     except KeyboardInterrupt:
         stop.set()
         print("mavins demo: interrupted", file=sys.stderr)

@@ -103,16 +103,18 @@ class DemoReport:
     within_3_sigma: tuple[int, int] = (0, 0)  # (north/east errors inside 3 sigma, errors compared)
     sent: int = 0  # messages the simulator streamed
     scale: tuple[tuple[str, float, float, float], ...] = ()  # with --scale-factors: (name, estimate, sigma, truth) ppm
+    misalignment: tuple[tuple[str, float, float, float], ...] = ()  # with --misalignment: likewise in arcsec
 
     def lines(self) -> list[str]:
         inside, total = self.within_3_sigma
         share = f"{inside}/{total} ({100.0 * inside / total:.1f} %)" if total else "none compared"
-        scale = []
-        if self.scale:
-            ok = sum(abs(e - t) <= 3.0 * s for _, e, s, t in self.scale)
-            scale = [f"scale factors (ppm) estimate +- 1-sigma (simulated): "
-                     + ", ".join(f"{n} {e:.0f} +- {s:.0f} ({t:.0f})" for n, e, s, t in self.scale)
-                     + f"; inside 3-sigma: {ok}/{len(self.scale)}"]
+        sensor = []
+        for what, rows in (("scale factors (ppm)", self.scale), ("misalignments (arcsec)", self.misalignment)):
+            if rows:
+                ok = sum(abs(e - t) <= 3.0 * s for _, e, s, t in rows)
+                sensor.append(f"{what} estimate +- 1-sigma (simulated): "
+                              + ", ".join(f"{n} {e:.0f} +- {s:.0f} ({t:.0f})" for n, e, s, t in rows)
+                              + f"; inside 3-sigma: {ok}/{len(rows)}")
         return [
             f"messages streamed / taken by the service: {self.sent} / {self.summary.messages}",
             f"published output sets received: {self.outputs}",
@@ -122,7 +124,7 @@ class DemoReport:
             f"final {self.pos_err_m_final:.3f} m",
             f"velocity error vs truth (final): {self.vel_err_ms_final:.4f} m/s",
             f"north/east position errors inside the published 3-sigma (ODOMETRY covariance): {share}",
-        ] + scale
+        ] + sensor
 
 
 def compare(collected: Collected, truth: np.ndarray) -> dict[str, object]:
@@ -197,27 +199,37 @@ class KeepUp:
 
 
 def _engine_config(lat: float, lon: float, alt: float, heading: str, grade: str,
-                   aiding: tuple[str, ...], year: float | None = None, scale_factors: bool = False) -> EngineConfig:
+                   aiding: tuple[str, ...], year: float | None = None, scale_factors: bool = False,
+                   misalignment: bool = False) -> EngineConfig:
     """The service's settings; the magnetic declination is the World Magnetic Model's at the start for
     ``year`` (None: today), the model the simulator's field comes from."""
     return EngineConfig(lat=lat, lon=lon, alt=alt, heading=heading, align=5.0, mag_year=year,
                         filter=FilterSettings(spec=grade if grade != "ideal" else "navigation", aiding=aiding,
-                                              scale_factors=scale_factors))
+                                              scale_factors=scale_factors, misalignment=misalignment))
 
 
-def _scale_report(svc: Service, grade: str) -> tuple[tuple[str, float, float, float], ...]:
-    """The filter's scale-factor estimates and 1-sigma (ppm) beside the simulated unit's (sim.errors.grade)."""
+def _sensor_report(svc: Service, grade: str, blocks: tuple[str, str]) -> tuple[tuple[str, float, float, float], ...]:
+    """The filter's estimates and 1-sigma of two sensor-error blocks of errmodel.STATE (gyro's, accelerometer's:
+    ``("SG", "SA")`` in ppm, ``("MG", "MA")`` in arcsec, the solution file's units) beside the simulated
+    unit's (sim.errors.grade)."""
     from sim.errors import grade as unit_of
 
-    from .core import errmodel, kalman
+    from .core import errmodel
+    from .core.aided import unit_factors
 
     flt, unit = svc.pipeline.engine.filter, unit_of(grade)
     out = []
-    for name, b, x, true in (("gyro", kalman.B_SG, errmodel.X_SG, unit.gyro.scale_factor_ppm),
-                             ("accel", kalman.B_SA, errmodel.X_SA, unit.accel.scale_factor_ppm)):
-        for i, axis in enumerate("xyz"):
-            out.append((f"{name} {axis}", 1e6 * float(flt.bias[b + i]),
-                        1e6 * math.sqrt(max(float(flt.P[x + i, x + i]), 0.0)), float(true[i])))
+    for name, blk, sensor in (("gyro", blocks[0], unit.gyro), ("accel", blocks[1], unit.accel)):
+        block = next(b for b in errmodel.STATE if b.name == blk)
+        x0 = errmodel.OFFSET[blk]
+        if blk.startswith("S"):
+            true = [float(v) for v in sensor.scale_factor_ppm]
+        else:
+            true = [float(sensor.misalignment[i][j]) / errmodel.ARCSEC for i, j in errmodel.OFF_DIAGONAL]
+        factor = float(unit_factors([f"{blk.lower()}_{block.labels[0]}"])[0])
+        for i, label in enumerate(block.labels):
+            out.append((f"{name} {label}", factor * float(flt.bias[x0 - errmodel.X_SENSORS + i]),
+                        factor * math.sqrt(max(float(flt.P[x0 + i, x0 + i]), 0.0)), true[i]))
     return tuple(out)
 
 
@@ -243,7 +255,7 @@ def run_demo(
     scenario: str = "flight", duration: float | None = 120.0, speed: float | None = 10.0, grade: str = "industrial",
     heading: str = "vehicle", rerun_path: Path | None = None, rerun_serve: bool = False, seed: int = 0,
     stop: threading.Event | None = None, aiding: tuple[str, ...] = ("gnss", "baro"),
-    gnss_outage: tuple[float, float] | None = (60.0, 90.0), scale_factors: bool = False,
+    gnss_outage: tuple[float, float] | None = (60.0, 90.0), scale_factors: bool = False, misalignment: bool = False,
 ) -> DemoReport:
     """Simulate, serve and collect over UDP on 127.0.0.1; return the error report."""
     from sim.generate import generate
@@ -269,7 +281,7 @@ def run_demo(
     from sim.aiding import MagConfig
 
     year = this_year()  # one date for the simulator's field and the service's magnetic model
-    engine_cfg = _engine_config(init.lat, init.lon, init.h, heading, grade, aiding, year, scale_factors)
+    engine_cfg = _engine_config(init.lat, init.lon, init.h, heading, grade, aiding, year, scale_factors, misalignment)
     recorder = None
     if rerun_path is not None or rerun_serve:
         from .record.recorder import Recorder
@@ -309,4 +321,5 @@ def run_demo(
     return DemoReport(len(collected.attitude), c["att_max"], c["att_final"], c["pos_final"], c["vel_final"],  # type: ignore[arg-type]
                       summary_box[0] if summary_box else svc.summary, collected, c["att_rms"], c["pos_rms"],  # type: ignore[arg-type]
                       c["pos_max"], c["inside"], sent,  # type: ignore[arg-type]
-                      _scale_report(svc, grade) if scale_factors and grade != "ideal" else ())
+                      _sensor_report(svc, grade, ("SG", "SA")) if scale_factors and grade != "ideal" else (),
+                      _sensor_report(svc, grade, ("MG", "MA")) if misalignment and grade != "ideal" else ())

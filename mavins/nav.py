@@ -150,6 +150,7 @@ class AidingFiles:
     mag_bias: float = 0.0  # initial 1-sigma of the magnetometer's hard iron (the file's unit); 0: not estimated
     scale_factors: bool = False  # estimate the grade's (or the spec's) gyro and accelerometer scale factors
     mag_unit: str | None = None  # the magnetometer file's unit (MAG_UNITS), None: not known
+    misalignment: bool = False  # estimate the grade's (or the spec's) gyro and accelerometer misalignments
 
     def field_at(self, lat_deg: float, lon_deg: float, h_m: float) -> dict[str, float | None]:
         """navigate_aided's magnetic keywords at the initial position: the declination (deg), the given one
@@ -308,7 +309,7 @@ def run_nav_aided(imu_path: Path, init_path: Path, out_path: Path, opts: NavOpti
         rows, stats = aided.navigate_aided(
             imu, init_keys, gnss, baro, mag=mag, static=static, spec=spec, lever_arm=lever_arm, gate=gate,
             mag_bias=aiding.mag_bias, **field,
-            scale_factors=aiding.scale_factors,
+            scale_factors=aiding.scale_factors, misalignment=aiding.misalignment,
             **{k: v for k, v in opts.strapdown.keywords().items() if k != "imu_rates"})
     except ValueError as exc:
         raise files.DataFileError(str(exc)) from None

@@ -18,9 +18,10 @@ estimates ``bg_x,y,z`` (rad/s), ``ba_x,y,z`` (m/s^2) and their 1-sigma
 ``sigma_bg_x,y,z``, ``sigma_ba_x,y,z`` (these 35 are the contract's,
 OUT_COLUMNS). A bias and its sigma are those of the sum of the constant and
 the Gauss-Markov parts (errmodel.py). Then, for each block of STATE_BLOCKS
-(gyro and accelerometer scale factor, magnetometer hard iron), its estimate
-and 1-sigma (``sg_x ... sigma_sg_x ...``): a solution file carries them
-where the filter estimates them (:func:`file_columns`).
+(gyro and accelerometer scale factor and misalignment, magnetometer hard
+iron), its estimate and 1-sigma (``sg_x ... sigma_sg_x ...``, ``mg_xy ...
+sigma_mg_xy ...``): a solution file carries them where the filter estimates
+them (:func:`file_columns`).
 
 Measurement rows (kernel units, each sorted by time; rows before the start
 are skipped):
@@ -92,11 +93,13 @@ FILTER_COLUMNS = (
 )  # fmt: skip
 OUT_COLUMNS = sd.OUT_COLUMNS + FILTER_COLUMNS
 OUT_SIZE = len(OUT_COLUMNS)  # 35: the contract's 14 solution and 21 filter columns
-STATE_BLOCKS = ("SG", "SA", "MB")  # errmodel.STATE blocks written after the contract's columns, where estimated
-STATE_COLUMNS = tuple(f"{p}{b.lower()}_{a}" for b in STATE_BLOCKS for p in ("", "sigma_") for a in "xyz")
+STATE_BLOCKS = ("SG", "SA", "MG", "MA", "MB")  # errmodel.STATE blocks after the contract's columns, where estimated
+_BLOCK = {b.name: b for b in em.STATE}
+STATE_COLUMNS = tuple(f"{p}{b.lower()}_{a}" for b in STATE_BLOCKS for p in ("", "sigma_") for a in _BLOCK[b].labels)
 ROW_COLUMNS = OUT_COLUMNS + STATE_COLUMNS
 ROW_SIZE = len(ROW_COLUMNS)
 _STATE_BLOCK_X = tuple(em.OFFSET[b] for b in STATE_BLOCKS)  # their first indices in the error state
+_STATE_BLOCK_N = tuple(_BLOCK[b].size for b in STATE_BLOCKS)  # and their sizes
 ACC_SIZE = 19  # the pending propagation: sum C T (9), f^n T (3), T, angle and velocity increments (body, 3 + 3)
 MAG_INCL_GATE = math.radians(20.0)  # rad: a sample whose inclination differs more from the model's is disturbed
 MAG_RESET_AFTER = 50  # consecutive rejected magnetometer samples after which the hard iron is reset (apply_mag)
@@ -128,7 +131,7 @@ def _propagate(s: np.ndarray, cfg: np.ndarray, spec: np.ndarray, P: np.ndarray, 
     f_n = acc[9:12] / T
     lat, lon, h = sd.position(s, cfg, frame)
     F = em.system_matrix(c, s[sd.S_V : sd.S_V + 3], lat, h, f_n, spec, cfg[sd.CFG_EARTH] > 0.5)
-    em.scale_factor_columns(F, c, acc[13:16] / T, acc[16:19] / T, spec)
+    em.motion_columns(F, c, acc[13:16] / T, acc[16:19] / T, spec)
     phi, qd = em.discretise(F, spec, T)
     kf.predict(P, phi, qd)
     for i in range(ACC_SIZE):
@@ -191,10 +194,8 @@ def push_rate_aided(s: np.ndarray, cfg: np.ndarray, spec: np.ndarray, P: np.ndar
     update. Same return codes and ``frame`` as push_rate_scalars."""
     literally(frame)
     dt = t - s[sd.S_TJ]
-    cwx, cwy, cwz = kf.correct_gyro(bias, 0, wx, 1.0), kf.correct_gyro(bias, 1, wy, 1.0), \
-        kf.correct_gyro(bias, 2, wz, 1.0)
-    cfx, cfy, cfz = kf.correct_accel(bias, 0, fx, 1.0), kf.correct_accel(bias, 1, fy, 1.0), \
-        kf.correct_accel(bias, 2, fz, 1.0)
+    cwx, cwy, cwz = kf.correct_gyro3(bias, wx, wy, wz, 1.0)
+    cfx, cfy, cfz = kf.correct_accel3(bias, fx, fy, fz, 1.0)
     r = sd.push_rate_scalars(s, cfg, t, cwx, cwy, cwz, cfx, cfy, cfz, frame)
     if r < 0:
         return r
@@ -348,11 +349,12 @@ def filter_row(P: np.ndarray, bias: np.ndarray, out: np.ndarray) -> None:
     21, then, when ``out`` has ROW_SIZE values, each STATE_BLOCKS block's estimate and 1-sigma."""
     k = OUT_SIZE
     if out.shape[0] >= ROW_SIZE:  # a row of the contract's 35 columns only has no room for them
-        for x0 in _STATE_BLOCK_X:
-            for i in range(3):
+        for b in range(len(_STATE_BLOCK_X)):
+            x0, n = _STATE_BLOCK_X[b], _STATE_BLOCK_N[b]
+            for i in range(n):
                 out[k + i] = bias[x0 - em.X_SENSORS + i]
-                out[k + 3 + i] = np.sqrt(max(P[x0 + i, x0 + i], 0.0))
-            k += 6
+                out[k + n + i] = np.sqrt(max(P[x0 + i, x0 + i], 0.0))
+            k += 2 * n
     for i in range(3):
         out[14 + i] = np.sqrt(max(P[em.X_DP + i, em.X_DP + i], 0.0))
         out[17 + i] = np.sqrt(max(P[em.X_DV + i, em.X_DV + i], 0.0))
@@ -446,9 +448,9 @@ def run_aided(
         dt = t[i] - s[sd.S_TJ]
         if not dt > 0.0:
             continue
+        dth_c[0], dth_c[1], dth_c[2] = kf.correct_gyro3(bias, dtheta[i, 0], dtheta[i, 1], dtheta[i, 2], dt)
+        dv_c[0], dv_c[1], dv_c[2] = kf.correct_accel3(bias, dv[i, 0], dv[i, 1], dv[i, 2], dt)
         for a in range(3):
-            dth_c[a] = kf.correct_gyro(bias, a, dtheta[i, a], dt)
-            dv_c[a] = kf.correct_accel(bias, a, dv[i, a], dt)
             sums[a] += dth_c[a]
             sums[3 + a] += dv_c[a]
         if iz < static.shape[0] and static[iz, 0] < t[i] <= static[iz, 1]:
@@ -573,14 +575,17 @@ def _columns(rows: Any, width: int, defaults: Sequence[float], name: str) -> np.
 
 def unit_factors(columns: Sequence[str]) -> np.ndarray:
     """Per column of a solution row, the factor from kernel to file units: degrees for lat, lon, the Euler
-    angles and sigma_att; deg/h for the gyro bias and its sigma; ppm for the scale factors and their
-    sigma; 1 for everything else."""
+    angles and sigma_att; deg/h for the gyro bias and its sigma; ppm for the scale factors, arcsec for the
+    misalignments (the spec keys' units) and their sigma; 1 for everything else."""
     deg = math.degrees(1.0)
     by_name = {n: deg for n in ("lat", "lon", "roll", "pitch", "yaw", "sigma_att_n", "sigma_att_e", "sigma_att_d")}
     for a in "xyz":
         by_name[f"bg_{a}"] = by_name[f"sigma_bg_{a}"] = _DEG_H
         for blk in ("sg", "sa"):
             by_name[f"{blk}_{a}"] = by_name[f"sigma_{blk}_{a}"] = 1e6
+    for blk in ("MG", "MA"):
+        for a in _BLOCK[blk].labels:
+            by_name[f"{blk.lower()}_{a}"] = by_name[f"sigma_{blk.lower()}_{a}"] = 1.0 / em.ARCSEC
     return np.array([by_name.get(n, 1.0) for n in columns])
 
 
@@ -593,12 +598,16 @@ def to_file_units(rows: np.ndarray, columns: Sequence[str] | None = None) -> np.
 
 def file_columns(spec: np.ndarray, mag_bias: float) -> np.ndarray:
     """The indices into a ROW_SIZE row of a solution file's columns: the contract's 35, then the
-    scale-factor blocks the spec estimates (errmodel SP_*_SCALE > 0) and the hard iron when its initial
-    1-sigma ``mag_bias`` is above 0 (docs/filter.md)."""
+    scale-factor and misalignment blocks the spec estimates (errmodel SP_*_SCALE, SP_*_MIS > 0) and the
+    hard iron when its initial 1-sigma ``mag_bias`` is above 0 (docs/filter.md)."""
+    estimated = {"SG": spec[em.SP_GYRO_SCALE] > 0.0, "SA": spec[em.SP_ACC_SCALE] > 0.0,
+                 "MG": spec[em.SP_GYRO_MIS] > 0.0, "MA": spec[em.SP_ACC_MIS] > 0.0, "MB": mag_bias > 0.0}
     idx = list(range(OUT_SIZE))
-    for k, on in enumerate((spec[em.SP_GYRO_SCALE] > 0.0, spec[em.SP_ACC_SCALE] > 0.0, mag_bias > 0.0)):
-        if on:
-            idx += range(OUT_SIZE + 6 * k, OUT_SIZE + 6 * k + 6)
+    k = OUT_SIZE
+    for name, n in zip(STATE_BLOCKS, _STATE_BLOCK_N):
+        if estimated[name]:
+            idx += range(k, k + 2 * n)
+        k += 2 * n
     return np.array(idx, dtype=np.int64)
 
 
@@ -621,6 +630,7 @@ def navigate_aided(
     mag_strength_gate: float | None = None,
     mag_bias: float = 0.0,
     scale_factors: bool = False,
+    misalignment: bool = False,
     baro_offset_sigma: float = 50.0,
     baro_drift: float = 0.0,
     covariance_every: int = 0,
@@ -654,7 +664,8 @@ def navigate_aided(
         mag_strength: the model's strength in the samples' unit (the hard iron's model); None: their mean.
         mag_strength_gate: the strength check in that unit (aided.MAG_STRENGTH_GATE gauss); None: none.
         mag_bias: initial 1-sigma of the magnetometer's hard iron per axis (its unit); 0: not estimated.
-        scale_factors: estimate a grade's scale factors (errmodel.spec_of; spec keys give theirs anyway).
+        scale_factors: estimate the grade's (or spec keys') scale factors (errmodel.spec_of).
+        misalignment: likewise their misalignments.
         baro_offset_sigma: initial 1-sigma of the baro offset (m).
         baro_drift: random walk of the baro offset (m/sqrt(s)).
         covariance_every: keep the full P after every this many output rows
@@ -671,7 +682,7 @@ def navigate_aided(
     cfg = sd.make_config(samples=samples, **options)
     if predict_every < 1:
         raise ValueError("predict_every must be >= 1")
-    sp = em.make_spec(spec, baro_drift, scale_factors)
+    sp = em.make_spec(spec, baro_drift, scale_factors, misalignment)
     s = initial_state(init)
     imu = np.asarray(imu, dtype=np.float64)
     if imu.ndim != 2 or imu.shape[1] != 7:

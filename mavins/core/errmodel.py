@@ -15,7 +15,9 @@ bias vector's layout derive from it)::
     x[21]    ob    barometer offset (m)
     x[22:25] sg    gyro scale-factor error (dimensionless, 1e-6 = 1 ppm)
     x[25:28] sa    accelerometer scale-factor error (dimensionless)
-    x[28:31] mb    magnetometer hard-iron bias (body FRD, the magnetometer's unit)
+    x[28:34] mg    gyro misalignment, the off-diagonal m_xy m_xz m_yx m_yz m_zx m_zy (rad)
+    x[34:40] ma    accelerometer misalignment, likewise (rad)
+    x[40:43] mb    magnetometer hard-iron bias (body FRD, the magnetometer's unit)
 
 The first 15 are the contract's. A sensor bias (``measured = true + b``) is
 ``b = b_const + b_gm``: a turn-on constant, slowly walking (rate random walk),
@@ -39,7 +41,7 @@ i.e. ``dpsi = phi``, and errors are estimate minus truth), the blocks are::
     dbg/dt  = n_rrw,g                 dba/dt = n_rrw,a
     dgg/dt  = -gg / tau_g + n_gm,g    dga/dt = -ga / tau_a + n_gm,a
     dob/dt  = n_baro
-    dsg/dt  = dsa/dt = dmb/dt = 0     (random constants)
+    dsg/dt  = dsa/dt = dmg/dt = dma/dt = dmb/dt = 0     (random constants)
 
 Scale factor (Titterton & Weston, Strapdown Inertial Navigation Technology,
 2nd ed., 2004, ch. 12, sensor error model ``dw = B + S w``; KF-GINS's state):
@@ -47,8 +49,19 @@ Scale factor (Titterton & Weston, Strapdown Inertial Navigation Technology,
 (1 + s)`` (kalman.correct_gyro); to first order the corrected rate is off by
 ``-(db + diag(w) ds)``, so the scale-factor columns are the bias columns
 times the body rate or specific force: ``dphi/dt += -C diag(w_ib^b) sg``,
-``ddv/dt += -C diag(f^b) sa``. The magnetometer's hard iron enters only its
-measurement (kalman.mag_heading).
+``ddv/dt += -C diag(f^b) sa``.
+
+Misalignment (the same sensor model's off-diagonal part, ``dw = B + S w + M w``
+with M zero on its diagonal: axis non-orthogonality and mounting): ``measured
+= (I + S + M) true + b``, corrected to first order as ``u - M u`` with ``u =
+(measured - b) / (1 + s)`` (kalman.correct_gyro3). The corrected rate is then
+off by ``-dM w``: element m_ij (row i, column j) of the gyro's enters as
+``dphi/dt += -C[:, i] w_j``, of the accelerometer's as ``ddv/dt += -C[:, i]
+f_j`` (:func:`motion_columns`). Only rotation about axis j (specific force
+along it) makes m_ij observable: a level multicopter sees the accelerometer's
+m_xz, m_yz (gravity along z) and little else, a vehicle that turns and banks
+more of them. The magnetometer's hard iron enters only its measurement
+(kalman.mag_heading).
 
 with ``w_in = w_ie + w_en`` and ``f^n = C f^b``. ``F_phi,v``, ``F_phi,p``
 (here with dp in metres: the latitude column divided by R_N + h, the height
@@ -117,6 +130,15 @@ class Block(NamedTuple):
     what: str
     sensor: bool = False
 
+    @property
+    def labels(self) -> tuple[str, ...]:
+        """Its elements' names in column names: ``x y z`` for a vector, ``xy xz yx yz zx zy`` for the six
+        off-diagonal elements of a 3 x 3 matrix (:data:`OFF_DIAGONAL`), none for a scalar."""
+        return {1: ("",), 3: ("x", "y", "z"), 6: tuple("xyz"[i] + "xyz"[j] for i, j in OFF_DIAGONAL)}[self.size]
+
+
+OFF_DIAGONAL = ((0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1))  # (row, column) of a misalignment block's elements
+
 
 STATE = (
     Block("PHI", 3, "rad", "attitude error phi: C_b^n(true) = (I - [phi x]) C_b^n(est)"),
@@ -129,6 +151,8 @@ STATE = (
     Block("BARO", 1, "m", "barometer offset", sensor=True),
     Block("SG", 3, "1", "gyro scale-factor error", sensor=True),
     Block("SA", 3, "1", "accelerometer scale-factor error", sensor=True),
+    Block("MG", 6, "rad", "gyro misalignment (off-diagonal, row-major)", sensor=True),
+    Block("MA", 6, "rad", "accelerometer misalignment (off-diagonal, row-major)", sensor=True),
     Block("MB", 3, "mag", "magnetometer hard-iron bias, body FRD (the magnetometer's unit)", sensor=True),
 )
 OFFSET = {b.name: sum(a.size for a in STATE[:i]) for i, b in enumerate(STATE)}  # block -> first index
@@ -136,7 +160,7 @@ NX = sum(b.size for b in STATE)
 # the blocks' first indices as module constants (numba takes module-level ints as compile-time constants)
 X_PHI, X_DV, X_DP = OFFSET["PHI"], OFFSET["DV"], OFFSET["DP"]
 X_BG, X_BA, X_GG, X_GA, X_BARO = OFFSET["BG"], OFFSET["BA"], OFFSET["GG"], OFFSET["GA"], OFFSET["BARO"]
-X_SG, X_SA, X_MB = OFFSET["SG"], OFFSET["SA"], OFFSET["MB"]
+X_SG, X_SA, X_MG, X_MA, X_MB = OFFSET["SG"], OFFSET["SA"], OFFSET["MG"], OFFSET["MA"], OFFSET["MB"]
 N_CONTRACT = OFFSET["GG"]  # the contract's states (attitude ... accelerometer bias); the rest follow them
 X_SENSORS = min(OFFSET[b.name] for b in STATE if b.sensor)  # the sensor errors run from here to the end
 
@@ -154,7 +178,9 @@ SP_ACC_RRW = 9  # m/s^2/sqrt(s)
 SP_BARO_DRIFT = 10  # random walk of the barometer offset (m/sqrt(s))
 SP_GYRO_SCALE = 11  # initial 1-sigma of the gyro scale-factor error (dimensionless; 0: not estimated)
 SP_ACC_SCALE = 12  # likewise of the accelerometer's
-SP_SIZE = 13
+SP_GYRO_MIS = 13  # initial 1-sigma of each gyro misalignment element (rad; 0: not estimated)
+SP_ACC_MIS = 14  # likewise of the accelerometer's
+SP_SIZE = 15
 
 _DEG = math.pi / 180.0
 _DEG_PER_H = _DEG / 3600.0
@@ -183,6 +209,8 @@ class ImuSpec:
     accel_rrw: float = 0.0  # m/s^2/sqrt(s)
     gyro_scale: float = 0.0  # 1-sigma scale-factor error per axis (dimensionless, 1e-6 = 1 ppm); 0: not estimated
     accel_scale: float = 0.0  # likewise
+    gyro_misalignment: float = 0.0  # 1-sigma of each off-diagonal misalignment element (rad); 0: not estimated
+    accel_misalignment: float = 0.0  # likewise
 
     def __post_init__(self) -> None:
         for name in self.__dataclass_fields__:
@@ -210,6 +238,8 @@ class ImuSpec:
         sp[SP_BARO_DRIFT] = float(baro_drift)
         sp[SP_GYRO_SCALE] = self.gyro_scale
         sp[SP_ACC_SCALE] = self.accel_scale
+        sp[SP_GYRO_MIS] = self.gyro_misalignment
+        sp[SP_ACC_MIS] = self.accel_misalignment
         return sp
 
 
@@ -224,7 +254,10 @@ SPEC_KEYS = (
     "accel_bias_tau",
     "gyro_scale",
     "accel_scale",
+    "gyro_misalignment",
+    "accel_misalignment",
 )
+ARCSEC = math.pi / (180.0 * 3600.0)  # rad: the spec keys' misalignment unit
 
 
 def spec_from_keys(keys: Mapping[str, float]) -> ImuSpec:
@@ -235,8 +268,8 @@ def spec_from_keys(keys: Mapping[str, float]) -> ImuSpec:
     ``accel_bias_instability`` m/s^2, ``accel_bias_tau`` s. A missing
     instability means a constant bias; a missing key otherwise means 0.
     ``gyro_scale`` and ``accel_scale`` (ppm, 1-sigma) select the scale-factor
-    states (absent: not estimated); misalignment keys are not part of this
-    model and ignored.
+    states, ``gyro_misalignment`` and ``accel_misalignment`` (arcsec, 1-sigma of
+    each element) the misalignment states (absent: not estimated).
     """
 
     def get(name: str) -> float:
@@ -260,6 +293,8 @@ def spec_from_keys(keys: Mapping[str, float]) -> ImuSpec:
         accel_tau=tau("accel_bias_tau", "accel_bias_instability"),
         gyro_scale=get("gyro_scale") * 1e-6,
         accel_scale=get("accel_scale") * 1e-6,
+        gyro_misalignment=get("gyro_misalignment") * ARCSEC,
+        accel_misalignment=get("accel_misalignment") * ARCSEC,
     )
 
 
@@ -276,22 +311,24 @@ def spec_to_keys(spec: ImuSpec) -> dict[str, float]:
         "accel_bias_tau": spec.accel_tau,
         "gyro_scale": spec.gyro_scale * 1e6,
         "accel_scale": spec.accel_scale * 1e6,
+        "gyro_misalignment": spec.gyro_misalignment / ARCSEC,
+        "accel_misalignment": spec.accel_misalignment / ARCSEC,
     }
 
 
 GRADES = grades.GRADES
 
 
-def spec_from_grade(name: str, scale_factors: bool = False) -> ImuSpec:
+def spec_from_grade(name: str, scale_factors: bool = False, misalignment: bool = False) -> ImuSpec:
     """ImuSpec with the figures of grade ``name`` (core/grades.py, the simulator's too).
 
     The simulator draws ``bias = turn-on + Gauss-Markov + rate random walk``:
     the initial sigma is the turn-on sigma, the Gauss-Markov sigma and tau and
     the rate random walk are taken as they are; with ``scale_factors`` the
     scale-factor magnitude (ppm) as the 1-sigma of the scale-factor states
-    (else they are not estimated). Misalignment,
-    g-sensitivity, quantisation, timestamp jitter and dropped samples are not
-    in this model.
+    (else they are not estimated), with ``misalignment`` the misalignment
+    magnitude (rad) as the 1-sigma of each misalignment element. G-sensitivity,
+    quantisation, timestamp jitter and dropped samples are not in this model.
     """
     f = grades.grade_figures(name)
     return ImuSpec(
@@ -307,29 +344,38 @@ def spec_from_grade(name: str, scale_factors: bool = False) -> ImuSpec:
         accel_rrw=f.accel.rate_random_walk,
         gyro_scale=f.gyro.scale_factor_ppm * 1e-6 if scale_factors else 0.0,
         accel_scale=f.accel.scale_factor_ppm * 1e-6 if scale_factors else 0.0,
+        gyro_misalignment=f.gyro.misalignment if misalignment else 0.0,
+        accel_misalignment=f.accel.misalignment if misalignment else 0.0,
     )
 
 
-def spec_of(spec: str | ImuSpec | Mapping[str, float], scale_factors: bool = False) -> ImuSpec:
+def spec_of(spec: str | ImuSpec | Mapping[str, float], scale_factors: bool = False,
+            misalignment: bool = False) -> ImuSpec:
     """ImuSpec from a grade name, an ImuSpec (as it is) or the contract's spec keys; the scale factors of the
     grade or of the keys (``gyro_scale``/``accel_scale``, one of them then needed) only with ``scale_factors``
-    (the filter estimates them then: ``--scale-factors``)."""
+    (the filter estimates them then: ``--scale-factors``), the misalignments likewise only with
+    ``misalignment`` (``gyro_misalignment``/``accel_misalignment``: ``--misalignment``)."""
     if isinstance(spec, str):
-        return spec_from_grade(spec, scale_factors)
+        return spec_from_grade(spec, scale_factors, misalignment)
     if isinstance(spec, ImuSpec):
         return spec
     out = spec_from_keys(spec)
     if not scale_factors:
-        return dataclasses.replace(out, gyro_scale=0.0, accel_scale=0.0)
-    if not (out.gyro_scale > 0.0 or out.accel_scale > 0.0):
+        out = dataclasses.replace(out, gyro_scale=0.0, accel_scale=0.0)
+    elif not (out.gyro_scale > 0.0 or out.accel_scale > 0.0):
         raise ValueError("--scale-factors with an IMU spec needs gyro_scale and/or accel_scale (ppm) in it")
+    if not misalignment:
+        out = dataclasses.replace(out, gyro_misalignment=0.0, accel_misalignment=0.0)
+    elif not (out.gyro_misalignment > 0.0 or out.accel_misalignment > 0.0):
+        raise ValueError("--misalignment with an IMU spec needs gyro_misalignment and/or accel_misalignment "
+                         "(arcsec) in it")
     return out
 
 
 def make_spec(spec: str | ImuSpec | Mapping[str, float], baro_drift: float = 0.0,
-              scale_factors: bool = False) -> np.ndarray:
+              scale_factors: bool = False, misalignment: bool = False) -> np.ndarray:
     """Process-model vector from a grade name, an ImuSpec or the contract's spec keys (:func:`spec_of`)."""
-    return spec_of(spec, scale_factors).as_array(baro_drift)
+    return spec_of(spec, scale_factors, misalignment).as_array(baro_drift)
 
 
 # --- small dense linear algebra (explicit loops: numba's np.dot needs SciPy) --
@@ -390,7 +436,7 @@ def system_matrix(
     c: np.ndarray, v: np.ndarray, lat: float, h: float, f_n: np.ndarray, spec: np.ndarray, earth_on: bool
 ) -> np.ndarray:
     """Continuous error dynamics F (NX x NX) at one point of the trajectory, without the
-    scale-factor columns (:func:`scale_factor_columns` adds them where the motion is known).
+    scale-factor and misalignment columns (:func:`motion_columns` adds them where the motion is known).
 
     ``c`` = C_b^n, ``v`` NED velocity (m/s), lat (rad), h (m), ``f_n`` the
     specific force in n (m/s^2). ``earth_on`` False is the contract's
@@ -483,17 +529,25 @@ def system_matrix(
 
 
 @kernel
-def scale_factor_columns(F: np.ndarray, c: np.ndarray, w_b: np.ndarray, f_b: np.ndarray, spec: np.ndarray) -> None:
-    """Write the scale-factor columns into F (module docstring): ``-C diag(w_b)`` on phi for the gyro's,
-    ``-C diag(f_b)`` on dv for the accelerometer's, with ``w_b`` (rad/s) and ``f_b`` (m/s^2) the body rate
-    and specific force (the bias columns times the measured quantity, Titterton & Weston ch. 12). Only
-    for the scale factors the spec estimates (1-sigma > 0); the others stay decoupled."""
+def motion_columns(F: np.ndarray, c: np.ndarray, w_b: np.ndarray, f_b: np.ndarray, spec: np.ndarray) -> None:
+    """Write the columns of the errors proportional to the motion into F (module docstring; Titterton &
+    Weston ch. 12, ``dw = B + S w + M w``), with ``w_b`` (rad/s) and ``f_b`` (m/s^2) the body rate and
+    specific force: scale factors ``-C diag(w_b)`` on phi (gyro), ``-C diag(f_b)`` on dv (accelerometer);
+    misalignment element m_ij ``-C[:, i] w_j`` on phi, ``-C[:, i] f_j`` on dv. Only for the errors the
+    spec estimates (1-sigma > 0); the others stay decoupled."""
     for i in range(3):
         for j in range(3):
             if spec[SP_GYRO_SCALE] > 0.0:
                 F[X_PHI + i, X_SG + j] = -c[i, j] * w_b[j]
             if spec[SP_ACC_SCALE] > 0.0:
                 F[X_DV + i, X_SA + j] = -c[i, j] * f_b[j]
+    for k in range(6):
+        r, col = OFF_DIAGONAL[k]
+        for i in range(3):
+            if spec[SP_GYRO_MIS] > 0.0:
+                F[X_PHI + i, X_MG + k] = -c[i, r] * w_b[col]
+            if spec[SP_ACC_MIS] > 0.0:
+                F[X_DV + i, X_MA + k] = -c[i, r] * f_b[col]
 
 
 @kernel

@@ -31,6 +31,7 @@ EXPORTS = (
            f"i8({V}, {V}, {V}, {M}, {V}, {V}, {V}, f8, f8, f8, f8, f8, f8, f8, i8)", frame=0),
     Export("aided", "filter_row", f"none({M}, {V}, {V})"),
     Export("kalman", "gyro_bias_total", f"{V}({V})"),
+    Export("kalman", "correct_gyro3", f"UniTuple(f8, 3)({V}, f8, f8, f8, f8)"),
     Export("aided", "mag_stats", f"{V}({M})"),
     Export("kalman", "accel_bias_total", f"{V}({V})"),
     Export("aided", "flush_propagation", f"none({V}, {V}, {V}, {M}, {V})", frame=0),

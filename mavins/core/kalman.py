@@ -10,10 +10,11 @@ refuse aiding in the other frames.
 
 Bias vector ``bias`` (``B_*``, the filter's nominal sensor-error estimates):
 ``[bg_const(3) rad/s, ba_const(3) m/s^2, bg_gm(3), ba_gm(3), baro_offset m,
-sg(3), sa(3) scale factors, mb(3) magnetometer hard iron]``; ``bias[i]``
-corrects ``x[X_SENSORS + i]``. The bias the sensor carries is ``const + gm``
-per axis; the IMU data are corrected as ``(measured - bias) / (1 + scale)``
-(:func:`correct_gyro`, :func:`correct_accel`).
+sg(3), sa(3) scale factors, mg(6), ma(6) misalignments, mb(3) magnetometer
+hard iron]``; ``bias[i]`` corrects ``x[X_SENSORS + i]``. The bias the sensor
+carries is ``const + gm`` per axis; the IMU data are corrected as ``u - M u``
+with ``u = (measured - bias) / (1 + scale)`` (:func:`correct_gyro3`,
+:func:`correct_accel3`; errmodel.py's sensor model).
 
 Innovations are *predicted minus measured*, ``nu = h(est) - z``, so that
 ``nu = H x + noise`` with x = estimate minus truth; the update is then
@@ -46,9 +47,11 @@ from .errmodel import (
     NX,
     SP_ACC_BIAS,
     SP_ACC_GM,
+    SP_ACC_MIS,
     SP_ACC_SCALE,
     SP_GYRO_BIAS,
     SP_GYRO_GM,
+    SP_GYRO_MIS,
     SP_GYRO_SCALE,
     X_BA,
     X_BARO,
@@ -57,7 +60,9 @@ from .errmodel import (
     X_DV,
     X_GA,
     X_GG,
+    X_MA,
     X_MB,
+    X_MG,
     X_PHI,
     X_SA,
     X_SENSORS,
@@ -77,6 +82,7 @@ ALL_BUT_HEADING[X_PHI + 2] = 0.0
 B_BG, B_BA, B_GG, B_GA, B_BARO = (X_BG - X_SENSORS, X_BA - X_SENSORS, X_GG - X_SENSORS, X_GA - X_SENSORS,
                                   X_BARO - X_SENSORS)
 B_SG, B_SA, B_MB = X_SG - X_SENSORS, X_SA - X_SENSORS, X_MB - X_SENSORS
+B_MG, B_MA = X_MG - X_SENSORS, X_MA - X_SENSORS
 B_SIZE = NX - X_SENSORS
 
 
@@ -116,6 +122,30 @@ def correct_gyro(bias: np.ndarray, axis: int, x: float, dt: float) -> float:
 def correct_accel(bias: np.ndarray, axis: int, x: float, dt: float) -> float:
     """:func:`correct_gyro` for the accelerometer (m/s increment over dt, or m/s^2 with dt = 1)."""
     return (x - (bias[B_BA + axis] + bias[B_GA + axis]) * dt) / (1.0 + bias[B_SA + axis])
+
+
+@kernel
+def unmisalign(bias: np.ndarray, b0: int, u0: float, u1: float, u2: float) -> tuple[float, float, float]:
+    """``u - M u`` with M the misalignment estimate at ``bias[b0:b0 + 6]`` (off-diagonal m_xy m_xz m_yx m_yz
+    m_zx m_zy, rad): the first-order inverse of ``(I + M)`` (errmodel.py, misalignment model)."""
+    return (u0 - (bias[b0] * u1 + bias[b0 + 1] * u2),
+            u1 - (bias[b0 + 2] * u0 + bias[b0 + 3] * u2),
+            u2 - (bias[b0 + 4] * u0 + bias[b0 + 5] * u1))
+
+
+@kernel
+def correct_gyro3(bias: np.ndarray, x0: float, x1: float, x2: float, dt: float) -> tuple[float, float, float]:
+    """A raw gyro triad (angle increments over dt, or rates with dt = 1) corrected by every estimate:
+    :func:`correct_gyro` per axis, then :func:`unmisalign` (errmodel.py's sensor model)."""
+    return unmisalign(bias, B_MG, correct_gyro(bias, 0, x0, dt), correct_gyro(bias, 1, x1, dt),
+                      correct_gyro(bias, 2, x2, dt))
+
+
+@kernel
+def correct_accel3(bias: np.ndarray, x0: float, x1: float, x2: float, dt: float) -> tuple[float, float, float]:
+    """:func:`correct_gyro3` for the accelerometer triad."""
+    return unmisalign(bias, B_MA, correct_accel(bias, 0, x0, dt), correct_accel(bias, 1, x1, dt),
+                      correct_accel(bias, 2, x2, dt))
 
 
 @kernel
@@ -660,7 +690,7 @@ def initial_covariance(
     magnetometer hard iron (its unit, each axis; 0: taken as calibrated, not estimated).
 
     The bias blocks take the spec's initial 1-sigma (constant part) and the
-    stationary Gauss-Markov sigma, the scale factors the spec's (0: not estimated).
+    stationary Gauss-Markov sigma, the scale factors and misalignments the spec's (0: not estimated).
     """
     P = np.zeros((NX, NX))
     for i in range(3):
@@ -673,6 +703,9 @@ def initial_covariance(
         P[X_SG + i, X_SG + i] = spec[SP_GYRO_SCALE] ** 2
         P[X_SA + i, X_SA + i] = spec[SP_ACC_SCALE] ** 2
         P[X_MB + i, X_MB + i] = sigma_mag_bias * sigma_mag_bias
+    for k in range(6):
+        P[X_MG + k, X_MG + k] = spec[SP_GYRO_MIS] ** 2
+        P[X_MA + k, X_MA + k] = spec[SP_ACC_MIS] ** 2
     P[X_PHI, X_PHI] = sigma_level * sigma_level
     P[X_PHI + 1, X_PHI + 1] = sigma_level * sigma_level
     P[X_PHI + 2, X_PHI + 2] = sigma_yaw * sigma_yaw

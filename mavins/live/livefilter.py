@@ -55,6 +55,7 @@ class FilterSettings:
     sigma_baro_offset: float = 50.0  # m
     sigma_mag: float = math.degrees(aided.DEFAULT_SIGMA_MAG)  # deg of heading (the batch filter's default)
     scale_factors: bool = False  # estimate the gyro and accelerometer scale factors (errmodel.spec_of)
+    misalignment: bool = False  # estimate the gyro and accelerometer misalignments (errmodel.spec_of)
     sigma_mag_bias: float = 0.0  # gauss per axis: initial 1-sigma of the hard iron (0: taken as calibrated, not estimated)
     sigma_zupt: float = aided.DEFAULT_SIGMA_ZUPT  # m/s (the batch filter's default)
     predict_dt: float = 0.01  # s: the covariance is propagated at about this interval
@@ -79,7 +80,8 @@ class LiveFilter:
         for k in self.settings.aiding:
             if k not in AIDING_KINDS:
                 raise ValueError(f"aiding kinds are {', '.join(AIDING_KINDS)} (or none), got {k!r}")
-        self.spec = errmodel.make_spec(self.settings.spec, scale_factors=self.settings.scale_factors)
+        self.spec = errmodel.make_spec(self.settings.spec, scale_factors=self.settings.scale_factors,
+                                       misalignment=self.settings.misalignment)
         self.lever = np.asarray(self.settings.lever_arm, dtype=float).reshape(3)
         self.P = np.zeros((errmodel.NX, errmodel.NX))
         self.bias = np.zeros(kalman.B_SIZE)
@@ -188,11 +190,8 @@ class LiveFilter:
         return kalman.gyro_bias_total(self.bias)
 
     def body_rate(self, w: tuple) -> tuple[float, float, float]:
-        """A raw gyro reading (rad/s, body) corrected by the estimates as floats: the arithmetic of
-        kalman.correct_gyro, ``(w - b) / (1 + s)``, without building arrays (once per attitude update)."""
-        b = self.bias.tolist()
-        g, m, k = kalman.B_BG, kalman.B_GG, kalman.B_SG
-        return tuple((w[i] - (b[g + i] + b[m + i])) / (1.0 + b[k + i]) for i in range(3))  # type: ignore[return-value]
+        """A raw gyro reading (rad/s, body) corrected by the estimates (kalman.correct_gyro3)."""
+        return kalman.correct_gyro3(self.bias, float(w[0]), float(w[1]), float(w[2]), 1.0)
 
     @property
     def accel_bias(self) -> np.ndarray:

@@ -784,15 +784,25 @@ HARD_IRON = 10.0  # uT: 0.1 gauss of hard iron
 HARD_IRON_SIGMA = HARD_IRON / math.sqrt(3.0)  # uT per axis: the filter's prior, 0.1 gauss RMS
 
 
-def run_sensor_monte_carlo(trajectory, *, hard_iron: bool, scale: bool, estimate: bool) -> dict:
+def misalignment_matrix(m6: np.ndarray) -> tuple[tuple[float, float, float], ...]:
+    """The simulator's 3 x 3 misalignment (zero diagonal) of the six off-diagonal elements m_xy m_xz m_yx m_yz
+    m_zx m_zy (row i, column j: the true j-th component sensed on axis i; errmodel.OFF_DIAGONAL)."""
+    m = np.zeros((3, 3))
+    m[[0, 0, 1, 1, 2, 2], [1, 2, 0, 2, 0, 1]] = m6
+    return tuple(tuple(float(x) for x in row) for row in m)
+
+
+def run_sensor_monte_carlo(trajectory, *, hard_iron: bool, scale: bool, estimate: bool,
+                           misalign: bool = False) -> dict:
     """N_SENSOR runs of the quiet flight with the consumer grade's stochastic errors and, drawn per run from the
     filter's prior, a hard iron on the 50 Hz magnetometer (``hard_iron``; 10 uT in a random direction) or gyro
     and accelerometer
     scale factors (``scale``; the grade's 3333 and 10000 ppm as 1-sigma). ``estimate``: the filter models them
-    (``mag_bias``, the spec's scale sigmas), else not. Returns the attitude/velocity/position NEES per 1 Hz
+    (``mag_bias``, the spec's scale sigmas), else not; or gyro and accelerometer misalignments (``misalign``; the
+    grade's 6.7e-3 rad, 0.38 deg, as 1-sigma of each of the 12 elements). Returns the attitude/velocity/position NEES per 1 Hz
     epoch, the heading's normalised errors after 60 s, and the final NEES and z of the sensor-error states."""
     truth_all = trajectory.exact.truth
-    spec_true = em.spec_from_grade("consumer", scale_factors=True)
+    spec_true = em.spec_from_grade("consumer", scale_factors=True, misalignment=True)
     out = {"nees": {k: [] for k in ("att", "vel", "pos")}, "yaw_z": [], "state_nees": [], "state_z": [],
            "state_sigma": [], "yaw_err": []}
     for r in range(N_SENSOR):
@@ -805,8 +815,17 @@ def run_sensor_monte_carlo(trajectory, *, hard_iron: bool, scale: bool, estimate
             model = dataclasses.replace(MODEL, gyro=dataclasses.replace(MODEL.gyro, scale_factor_ppm=tuple(sg * 1e6)),
                                         accel=dataclasses.replace(MODEL.accel, scale_factor_ppm=tuple(sa * 1e6)))
             truth_state, block = np.concatenate([sg, sa]), slice(em.X_SG, em.X_SA + 3)
+        if misalign:
+            mg = rng.standard_normal(6) * spec_true.gyro_misalignment
+            ma = rng.standard_normal(6) * spec_true.accel_misalignment
+            model = dataclasses.replace(
+                MODEL, gyro=dataclasses.replace(MODEL.gyro, misalignment=misalignment_matrix(mg)),
+                accel=dataclasses.replace(MODEL.accel, misalignment=misalignment_matrix(ma)))
+            truth_state, block = np.concatenate([mg, ma]), slice(em.X_MG, em.X_MA + 6)
         if not (scale and estimate):
-            spec = dataclasses.replace(spec_true, gyro_scale=0.0, accel_scale=0.0)
+            spec = dataclasses.replace(spec, gyro_scale=0.0, accel_scale=0.0)
+        if not (misalign and estimate):
+            spec = dataclasses.replace(spec, gyro_misalignment=0.0, accel_misalignment=0.0)
         ex = trajectory.exact
         t, dth, dv, _ = errors.apply(model, ex.t, ex.dtheta, ex.dv, seed, t_start=ex.t0)
         run = dataclasses.replace(trajectory, seed=seed)
@@ -845,14 +864,20 @@ def scale_mc(trajectory):
     return run_sensor_monte_carlo(trajectory, hard_iron=False, scale=True, estimate=True)
 
 
-@pytest.fixture(params=["hard_iron_mc", "scale_mc"])
+@pytest.fixture(scope="module")
+def misalignment_mc(trajectory):
+    return run_sensor_monte_carlo(trajectory, hard_iron=False, scale=False, estimate=True, misalign=True)
+
+
+@pytest.fixture(params=["hard_iron_mc", "scale_mc", "misalignment_mc"])
 def sensor_mc(request):
     return request.getfixturevalue(request.param)
 
 
 @pytest.mark.parametrize("block", ["pos", "vel", "att"])
 def test_sensor_error_monte_carlo_nees(sensor_mc, block: str) -> None:
-    """With 0.1 gauss of hard iron, or with the consumer grade's scale factors, estimated: the ANEES of each
+    """With 0.1 gauss of hard iron, or with the consumer grade's scale factors or misalignments, estimated: the
+    ANEES of each
     navigation block, averaged over the 1 Hz epochs, in the chi2(3N)/N band (N = 20: 2.0 .. 4.1)."""
     anees = np.mean(np.array(sensor_mc["nees"][block]), axis=0)
     lo, hi = band(3, N_SENSOR)
@@ -867,6 +892,19 @@ def test_scale_factors_end_inside_their_sigma(scale_mc) -> None:
     # jointly (6 dof) measured 8.2 against 6: the correlations of the barely observable accelerometer scale
     # factors with the biases are somewhat over-confident (docs/filter.md); held below 1.5^2 times 6
     assert np.mean(scale_mc["state_nees"]) < 1.5 ** 2 * 6, np.mean(scale_mc["state_nees"])
+
+
+def test_misalignments_end_inside_their_sigma(misalignment_mc) -> None:
+    """The twelve misalignment elements at the end against the simulator's: each one's normalised error RMS over
+    the runs within 1 / 1.5 .. 1.5, and jointly (12 dof) the mean NEES below 1.5^2 times 12; the elements the
+    flight excites are learnt (final sigma below 0.9 of the prior for at least two of them in every run)."""
+    z = np.array(misalignment_mc["state_z"])
+    rms = np.sqrt(np.mean(z ** 2, axis=0))
+    assert np.all(rms < 1.5) and np.all(rms > 1.0 / 1.5), rms
+    assert np.mean(misalignment_mc["state_nees"]) < 1.5 ** 2 * 12, np.mean(misalignment_mc["state_nees"])
+    prior = em.spec_from_grade("consumer", misalignment=True).gyro_misalignment
+    learnt = (np.array(misalignment_mc["state_sigma"]) < 0.9 * prior).sum(axis=1)
+    assert np.all(learnt >= 2), learnt
 
 
 def test_hard_iron_is_learnt_nearly_inside_its_sigma(hard_iron_mc) -> None:
@@ -890,11 +928,12 @@ def test_heading_within_its_sigma_with_hard_iron(hard_iron_mc) -> None:
     assert learnt.sum() >= N_SENSOR - 2, learnt  # a run may end just after a reset (aided.apply_mag)
 
 
-@pytest.mark.parametrize("which", ["hard_iron", "scale"])
+@pytest.mark.parametrize("which", ["hard_iron", "scale", "misalign"])
 def test_without_the_states_the_filter_is_overconfident(trajectory, which: str) -> None:
     """The same data with the states left out of the filter: the heading (hard iron) or the attitude (scale
-    factors) is off by several of its sigmas, so the tests above can fail."""
-    mc = run_sensor_monte_carlo(trajectory, hard_iron=which == "hard_iron", scale=which == "scale", estimate=False)
+    factors, misalignments) is off by several of its sigmas, so the tests above can fail."""
+    mc = run_sensor_monte_carlo(trajectory, hard_iron=which == "hard_iron", scale=which == "scale", estimate=False,
+                                misalign=which == "misalign")
     if which == "hard_iron":
         z = np.concatenate(mc["yaw_z"])
         assert math.sqrt(np.mean(z ** 2)) > 3.0

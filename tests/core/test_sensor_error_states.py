@@ -50,7 +50,7 @@ def test_scale_factor_columns_are_the_bias_columns_times_the_motion() -> None:
     c = euler_to_dcm(10.0 * DEG, -20.0 * DEG, 130.0 * DEG)
     w, f = np.array([0.1, -0.2, 0.3]), np.array([1.0, 0.5, -9.5])
     F = np.zeros((em.NX, em.NX))
-    em.scale_factor_columns(F, c, w, f, em.ImuSpec(gyro_scale=1e-3, accel_scale=1e-3).as_array())
+    em.motion_columns(F, c, w, f, em.ImuSpec(gyro_scale=1e-3, accel_scale=1e-3).as_array())
     np.testing.assert_allclose(F[em.X_PHI:em.X_PHI + 3, em.X_SG:em.X_SG + 3], -c * w[None, :], rtol=1e-15, atol=0)
     np.testing.assert_allclose(F[em.X_DV:em.X_DV + 3, em.X_SA:em.X_SA + 3], -c * f[None, :], rtol=1e-15, atol=0)
     F[em.X_PHI:em.X_PHI + 3, em.X_SG:em.X_SG + 3] = 0.0
@@ -58,7 +58,7 @@ def test_scale_factor_columns_are_the_bias_columns_times_the_motion() -> None:
     assert not F.any()
     for spec in (em.ImuSpec(accel_scale=1e-3), em.ImuSpec(gyro_scale=1e-3)):
         F = np.zeros((em.NX, em.NX))
-        em.scale_factor_columns(F, c, w, f, spec.as_array())
+        em.motion_columns(F, c, w, f, spec.as_array())
         assert F[:, em.X_SG:em.X_SG + 3].any() == (spec.gyro_scale > 0.0)
         assert F[:, em.X_SA:em.X_SA + 3].any() == (spec.accel_scale > 0.0)
 
@@ -179,6 +179,18 @@ def test_file_columns_follow_the_estimated_states() -> None:
     assert [aided.ROW_COLUMNS[i] for i in mb][35:] == names[47:]
     f = aided.unit_factors(names)
     assert list(f[35:47]) == [1e6] * 12 and list(f[47:]) == [1.0] * 6
+    # misalignments: twelve per triad after the scale factors, in arcsec (the spec keys' unit)
+    mis = aided.file_columns(em.ImuSpec(accel_scale=1e-3, gyro_misalignment=1e-3, accel_misalignment=1e-3).as_array(),
+                             0.0)
+    names = [aided.ROW_COLUMNS[i] for i in mis]
+    pairs = ["xy", "xz", "yx", "yz", "zx", "zy"]
+    assert names[35:] == ["sa_x", "sa_y", "sa_z", "sigma_sa_x", "sigma_sa_y", "sigma_sa_z"] + [
+        f"{p}{b}_{a}" for b in ("mg", "ma") for p in ("", "sigma_") for a in pairs]
+    f = aided.unit_factors(names)
+    assert list(f[35:41]) == [1e6] * 6
+    np.testing.assert_allclose(f[41:], 648000.0 / math.pi, rtol=1e-15)  # rad -> arcsec
+    only_ma = aided.file_columns(em.ImuSpec(accel_misalignment=1e-3).as_array(), 0.0)
+    assert [aided.ROW_COLUMNS[i] for i in only_ma][35:] == names[53:]
 
 
 
@@ -318,3 +330,120 @@ def test_the_scale_factors_are_estimated_only_when_asked() -> None:
     assert em.spec_of(spec) is spec and em.spec_of(spec, True) is spec
     sp = em.make_spec("industrial", scale_factors=True)
     assert sp[em.SP_GYRO_SCALE] == pytest.approx(1e-3, rel=1e-12) and sp[em.SP_ACC_SCALE] == pytest.approx(1e-3)
+
+
+# --- misalignment ------------------------------------------------------------------------------------------------
+def _mat(m6) -> np.ndarray:
+    """The 3 x 3 misalignment (zero diagonal) of the elements m_xy m_xz m_yx m_yz m_zx m_zy."""
+    m = np.zeros((3, 3))
+    m[[0, 0, 1, 1, 2, 2], [1, 2, 0, 2, 0, 1]] = m6
+    return m
+
+
+def test_the_misalignment_correction_is_the_first_order_inverse() -> None:
+    """A reading ``(I + S)(I + M) w + b`` (the simulator's sensor model, sim/errors.py) corrected with the
+    estimates S, M, b gives ``(I - M^2) w``: per axis ``u = (x - b) / (1 + s) = (I + M) w`` exactly, then
+    ``u - M u = (I - M)(I + M) w``; the residual is second order in M. Rates and increments alike."""
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        bias = rng.normal(0.0, 1e-3, kf.B_SIZE)
+        w, f, dt = rng.normal(0.0, 1.0, 3), rng.normal(0.0, 5.0, 3), 0.004
+        for corr, b0, s0, m0, x in ((kf.correct_gyro3, (kf.B_BG, kf.B_GG), kf.B_SG, kf.B_MG, w),
+                                    (kf.correct_accel3, (kf.B_BA, kf.B_GA), kf.B_SA, kf.B_MA, f)):
+            b = bias[b0[0]:b0[0] + 3] + bias[b0[1]:b0[1] + 3]
+            S, M = np.diag(bias[s0:s0 + 3]), _mat(bias[m0:m0 + 6])
+            raw = (np.eye(3) + S) @ (np.eye(3) + M) @ x + b
+            want = (np.eye(3) - M @ M) @ x
+            np.testing.assert_allclose(corr(bias, *raw, 1.0), want, rtol=0, atol=1e-15 * np.abs(x).max() + 1e-17)
+            np.testing.assert_allclose(corr(bias, *(raw * dt), dt), want * dt, rtol=0,
+                                       atol=1e-15 * np.abs(x).max() * dt)
+    # with no misalignment estimate the triad correction is the per-axis one, to the bit
+    bias[kf.B_MG:kf.B_MA + 6] = 0.0
+    got = kf.correct_gyro3(bias, 0.3, -0.2, 0.1, 1.0)
+    assert got == tuple(kf.correct_gyro(bias, a, x, 1.0) for a, x in enumerate((0.3, -0.2, 0.1)))
+
+
+def test_misalignment_columns_are_the_bias_columns_times_the_cross_axis_motion() -> None:
+    """Element m_ij (row i, column j) enters ``d phi/dt`` as ``-C[:, i] w_j`` (gyro) and ``d dv/dt`` as
+    ``-C[:, i] f_j`` (accelerometer), in errmodel.OFF_DIAGONAL order, only when the spec estimates it."""
+    c = euler_to_dcm(10.0 * DEG, -20.0 * DEG, 130.0 * DEG)
+    w, f = np.array([0.1, -0.2, 0.3]), np.array([1.0, 0.5, -9.5])
+    F = np.zeros((em.NX, em.NX))
+    em.motion_columns(F, c, w, f, em.ImuSpec(gyro_misalignment=1e-3, accel_misalignment=1e-3).as_array())
+    for k, (i, j) in enumerate([(0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1)]):
+        np.testing.assert_allclose(F[em.X_PHI:em.X_PHI + 3, em.X_MG + k], -c[:, i] * w[j], rtol=1e-15, atol=0)
+        np.testing.assert_allclose(F[em.X_DV:em.X_DV + 3, em.X_MA + k], -c[:, i] * f[j], rtol=1e-15, atol=0)
+    F[em.X_PHI:em.X_PHI + 3, em.X_MG:em.X_MG + 6] = 0.0
+    F[em.X_DV:em.X_DV + 3, em.X_MA:em.X_MA + 6] = 0.0
+    assert not F.any()
+    for spec in (em.ImuSpec(accel_misalignment=1e-3), em.ImuSpec(gyro_misalignment=1e-3)):
+        F = np.zeros((em.NX, em.NX))
+        em.motion_columns(F, c, w, f, spec.as_array())
+        assert F[:, em.X_MG:em.X_MG + 6].any() == (spec.gyro_misalignment > 0.0)
+        assert F[:, em.X_MA:em.X_MA + 6].any() == (spec.accel_misalignment > 0.0)
+
+
+def test_an_unestimated_misalignment_tilts_a_turn_as_the_model_says() -> None:
+    """A level turn at w about down for T, the x gyro sensing ``m w`` of it (element m_xz): the solution turns
+    about the axis (m, 0, 1), and its tilt is exactly ``arccos(1 - (1 - cos th) m^2 / (1 + m^2))`` with th =
+    w T sqrt(1 + m^2) (Rodrigues), to first order ``2 m sin(w T / 2)``. The filter's propagation over the
+    turn from var(m_xz) = sigma^2 alone: ``phi = -dm (S_c, S_s, 0)`` with ``S_c = sum w dt cos(psi_k)``,
+    ``S_s = sum w dt sin(psi_k)`` over the attitude updates (the column -C[:, 0] w_z at each update's
+    attitude, errmodel.motion_columns; exact here: the laboratory frame has no other attitude dynamics)."""
+    w, m, rate, n = 0.5, 0.01, 100.0, 100
+    spec = em.ImuSpec(gyro_misalignment=0.02).as_array()
+    sigma = 0.02
+
+    def turn(mis: float) -> tuple[np.ndarray, np.ndarray, list[float]]:
+        st = sd.init_state(0.0, 0.0, 0.0, 0.0, np.zeros(3), 0.0, 0.0, 0.0)
+        P = np.zeros((em.NX, em.NX))
+        P[em.X_MG + 1, em.X_MG + 1] = sigma ** 2
+        bias, acc, sums = np.zeros(kf.B_SIZE), np.zeros(aided.ACC_SIZE), np.zeros(7)
+        yaws = []
+        for k in range(1, n + 1):
+            r = aided.push_rate_aided(st, CFG_LAB, spec, P, bias, acc, sums, k / rate, mis * w, 0.0, w,
+                                      0.0, 0.0, -9.80665, 1, sd.GEOGRAPHIC)
+            if r == 1:
+                c = st[sd.S_C:sd.S_C + 9].reshape(3, 3)
+                yaws.append(math.atan2(c[1, 0], c[0, 0]))
+        return st[sd.S_C:sd.S_C + 9].reshape(3, 3).copy(), P, yaws
+
+    c0, P, yaws = turn(0.0)
+    T = n / rate  # the solution starts at t = 0, the first sample's interval included
+    c1, _, _ = turn(m)
+    th = w * T * math.sqrt(1.0 + m * m)
+    tilt = math.acos(min(1.0, c1[2, 2]))
+    assert tilt == pytest.approx(math.acos(1.0 - (1.0 - math.cos(th)) * m * m / (1.0 + m * m)), rel=1e-9)
+    assert tilt == pytest.approx(2.0 * m * math.sin(w * T / 2.0), rel=2e-2)
+    dt = 1.0 / rate
+    assert len(yaws) == n
+    s_c = sum(w * dt * math.cos(p) for p in yaws)
+    s_s = sum(w * dt * math.sin(p) for p in yaws)
+    x = em.X_MG + 1
+    assert P[em.X_PHI, x] == pytest.approx(-sigma ** 2 * s_c, rel=1e-9)
+    assert P[em.X_PHI + 1, x] == pytest.approx(-sigma ** 2 * s_s, rel=1e-9)
+    assert P[em.X_PHI, em.X_PHI] == pytest.approx(sigma ** 2 * s_c ** 2, rel=1e-9)
+    assert P[em.X_PHI + 1, em.X_PHI + 1] == pytest.approx(sigma ** 2 * s_s ** 2, rel=1e-9)
+    assert abs(P[em.X_PHI + 2, em.X_PHI + 2]) < 1e-30 and c0[2, 2] == pytest.approx(1.0, abs=1e-15)
+
+
+def test_the_misalignments_are_estimated_only_when_asked() -> None:
+    """errmodel.spec_of: a grade's misalignment (consumer 2 % / 3, industrial 0.05 deg) and a spec's
+    ``gyro_misalignment``/``accel_misalignment`` keys (arcsec) reach the filter only with ``misalignment``
+    (``--misalignment``), independently of the scale factors; none of the keys is refused with one line."""
+    assert em.spec_of("consumer").gyro_misalignment == 0.0
+    on = em.spec_of("consumer", misalignment=True)
+    assert on.gyro_misalignment == on.accel_misalignment == pytest.approx(0.02 / 3.0, rel=1e-12)
+    assert on.gyro_scale == 0.0
+    keys = {"gyro_arw": 0.1, "gyro_misalignment": 36.0, "accel_misalignment": 72.0, "gyro_scale": 10.0}
+    off = em.spec_of(keys)
+    assert (off.gyro_misalignment, off.accel_misalignment) == (0.0, 0.0)
+    on = em.spec_of(keys, misalignment=True)
+    assert (on.gyro_misalignment, on.accel_misalignment) == pytest.approx((36.0 * em.ARCSEC, 72.0 * em.ARCSEC),
+                                                                          rel=1e-12)
+    assert on.gyro_scale == 0.0
+    with pytest.raises(ValueError, match=r"^--misalignment with an IMU spec needs gyro_misalignment and/or "):
+        em.spec_of({"gyro_arw": 0.1}, misalignment=True)
+    sp = em.make_spec("industrial", misalignment=True)  # 0.05 deg (core/grades.py)
+    assert sp[em.SP_GYRO_MIS] == pytest.approx(0.05 * DEG, rel=1e-3) and sp[em.SP_ACC_MIS] == sp[em.SP_GYRO_MIS]
+    assert em.ARCSEC == pytest.approx(math.pi / 648000.0, rel=1e-15)

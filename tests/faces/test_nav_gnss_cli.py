@@ -297,9 +297,37 @@ def test_sim_hard_iron_is_learnt_by_nav_from_the_command_line(tmp_path) -> None:
     header, last = rows[0], [float(v) for v in rows[-1]]
     from mavins.core import aided
 
-    assert header[:35] == list(aided.OUT_COLUMNS) and header[35:] == list(aided.STATE_COLUMNS)
+    assert header[:35] == list(aided.OUT_COLUMNS)
+    assert header[35:] == [f"{p}{b}_{a}" for b in ("sg", "sa", "mb") for p in ("", "sigma_") for a in "xyz"]
     col = {n: i for i, n in enumerate(header)}
     for axis, truth in (("x", 6.0), ("y", -5.0)):
         est, sig = last[col[f"mb_{axis}"]], last[col[f"sigma_mb_{axis}"]]
         assert sig < 2.0 and abs(est - truth) < 3.0 * sig, (axis, est, sig)
     assert "mag_disturbed" not in err or "mag_disturbed: 0 accepted, 0 rejected" in err
+
+
+def test_nav_estimates_misalignments_from_the_command_line(tmp_path) -> None:
+    """``mavins sim flight --grade industrial`` (0.05 deg of misalignment times the simulator's pattern) then
+    ``mavins nav ... --grade industrial --misalignment``: the file ends with the twelve ``mg_*``, ``ma_*``
+    columns and their sigmas (arcsec, docs/conventions.md), each estimate within 3 of its sigma of the
+    simulated unit's, every sigma at most the 0.05 deg (180 arcsec) prior."""
+    import csv
+
+    sim = tmp_path / "sim"
+    code, err = run("sim", "flight", "-o", sim, "--duration", "90", "--rate", "100", "--grade", "industrial")
+    assert code == 0, err
+    out = tmp_path / "nav.csv"
+    code, err = run("nav", sim / "imu.csv", "--init", sim / "init.json", "--gnss", sim / "gnss.csv", "--grade",
+                    "industrial", "--misalignment", "-o", out)
+    assert code == 0, err
+    with open(out, newline="") as fh:
+        rows = list(csv.reader(fh))
+    header, last = rows[0], [float(v) for v in rows[-1]]
+    pairs = ["xy", "xz", "yx", "yz", "zx", "zy"]
+    assert header[35:] == [f"{p}{b}_{a}" for b in ("mg", "ma") for p in ("", "sigma_") for a in pairs]
+    col = {n: i for i, n in enumerate(header)}
+    truth = dict(zip(pairs, (180.0, -108.0, -144.0, 90.0, 54.0, -162.0)))  # 0.05 deg x sim/errors.py's pattern
+    for b in ("mg", "ma"):
+        for a in pairs:
+            est, sig = last[col[f"{b}_{a}"]], last[col[f"sigma_{b}_{a}"]]
+            assert 0.0 < sig <= 180.0 + 1e-6 and abs(est - truth[a]) <= 3.0 * sig, (b, a, est, sig)

@@ -891,8 +891,8 @@ def test_zero_velocity_updates_exactly(case):
 
 
 def test_body_rate_is_the_raw_rate_minus_both_gyro_bias_parts_to_the_bit() -> None:
-    """LiveFilter.body_rate (floats, per attitude update) equals numpy's w - (constant + Gauss-Markov
-    bias) bit for bit, and uses neither the accelerometer parts nor another axis."""
+    """LiveFilter.body_rate (floats, per attitude update) equals ``u - M u`` with u = (w - (constant +
+    Gauss-Markov bias)) / (1 + s), worked here bit for bit, and uses no accelerometer part."""
     from mavins.live.livefilter import LiveFilter
     from mavins.core import kalman
 
@@ -903,6 +903,10 @@ def test_body_rate_is_the_raw_rate_minus_both_gyro_bias_parts_to_the_bit() -> No
         w = tuple(float(x) for x in rng.normal(0.0, 0.5, 3))
         want = (np.array(w) - (flt.bias[kalman.B_BG:kalman.B_BG + 3] + flt.bias[kalman.B_GG:kalman.B_GG + 3])) \
             / (1.0 + flt.bias[kalman.B_SG:kalman.B_SG + 3])  # the scale factor: (w - b) / (1 + s)
+        mxy, mxz, myx, myz, mzx, mzy = flt.bias[kalman.B_MG:kalman.B_MG + 6]  # then the misalignment: u - M u
+        u = want.copy()
+        want = np.array([u[0] - (mxy * u[1] + mxz * u[2]), u[1] - (myx * u[0] + myz * u[2]),
+                         u[2] - (mzx * u[0] + mzy * u[1])])
         got = flt.body_rate(w)
         assert all(type(x) is float for x in got)
         assert np.array_equal(np.array(got), want)

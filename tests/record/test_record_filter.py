@@ -61,3 +61,23 @@ def test_the_demo_estimates_the_units_scale_factors() -> None:
         assert 0.0 < sig <= 1000.0 + 1e-6 and abs(est - true) <= 3.0 * sig, (name, est, sig, true)
     assert report.scale[2][2] < 1000.0
     assert any(line.startswith("scale factors (ppm)") and line.endswith("inside 3-sigma: 6/6") for line in report.lines())
+
+
+def test_the_demo_estimates_the_units_misalignments() -> None:
+    """``mavins demo --misalignment`` on the industrial flight: the service's filter estimates the twelve
+    misalignment elements of the simulated unit (sim.errors.grade: 0.05 deg times its fixed pattern, e.g.
+    180 arcsec for m_xy) and each ends within 3 of its sigma, which the report shows; the flight's turns and
+    accelerations teach it at least two of them (sigma below 0.9 of the 0.05 deg prior)."""
+    report = run_demo("flight", duration=90.0, speed=None, grade="industrial", rerun_path=None, gnss_outage=None,
+                      misalignment=True)
+    pairs = ["xy", "xz", "yx", "yz", "zx", "zy"]
+    assert [n for n, *_ in report.misalignment] == [f"{s} {p}" for s in ("gyro", "accel") for p in pairs]
+    pattern = [1.0, -0.6, -0.8, 0.5, 0.3, -0.9]  # sim/errors.py _MIS_PATTERN, row-major off the diagonal
+    np.testing.assert_allclose([t for *_, t in report.misalignment], [180.0 * p for p in pattern] * 2, rtol=1e-12)
+    prior = 180.0  # 0.05 deg in arcsec
+    for name, est, sig, true in report.misalignment:
+        assert 0.0 < sig <= prior + 1e-6 and abs(est - true) <= 3.0 * sig, (name, est, sig, true)
+    assert sum(sig < 0.9 * prior for _, _, sig, _ in report.misalignment) >= 2
+    assert report.scale == ()
+    assert any(line.startswith("misalignments (arcsec)") and line.endswith("inside 3-sigma: 12/12")
+               for line in report.lines())
