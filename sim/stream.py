@@ -67,6 +67,7 @@ class StreamOptions:
     seed: int = 0
     imus: int = 1  # 1..3; extra IMUs: HIGHRES_IMU id 1, 2 (highres) or SCALED_IMU2/3 (raw)
     gnss_outages: tuple[tuple[float, float], ...] = ()  # (start, end) s of sensor time without GPS_RAW_INT
+    gnss_latency: float = 0.0  # s: each GNSS fix is sent this long after it was measured, stamped when sent
     mag_rate: float = 0.0  # Hz of magnetometer samples in HIGHRES_IMU id 0 (0 = none)
     mag: MagConfig = MagConfig()  # the field and the sensor's noise
 
@@ -97,17 +98,21 @@ def frames(run: SimRun | Iterable[SimRun], mav: mavlink.MAVLink, opts: StreamOpt
     rng = np.random.default_rng(opts.seed + 1)
     mag_rng = np.random.default_rng([opts.seed, 0x6E3])  # apart from the GPS/baro noise
     last: dict[str, float | None] = {}
+    pending: list[tuple[float, tuple]] = []  # GNSS fixes measured, not yet sent (gnss_latency), across pieces
     whole = isinstance(run, SimRun)
     for piece in ([run] if whole else run):
         if not whole and len(piece.extra) < opts.imus - 1:
             raise ValueError(f"streaming {opts.imus} IMUs from pieces: make them with generate_chunks(imus={opts.imus})")
-        yield from _piece_frames(piece, mav, opts, rng, mag_rng, last)
+        yield from _piece_frames(piece, mav, opts, rng, mag_rng, last, pending)
 
 
 def _piece_frames(run: SimRun, mav: mavlink.MAVLink, opts: StreamOptions, rng: np.random.Generator,
-                  mag_rng: np.random.Generator, last: dict[str, float | None]
+                  mag_rng: np.random.Generator, last: dict[str, float | None], pending: list[tuple[float, tuple]]
                   ) -> Iterator[tuple[float, list[mavlink.MAVLink_message]]]:
-    """frames() of one run or piece; ``last`` carries the periods of the message rates between pieces."""
+    """frames() of one run or piece; ``last`` carries the periods of the message rates between pieces,
+    ``pending`` the GNSS fixes measured but not yet due (``opts.gnss_latency``): a fix measured at t is sent
+    with the first IMU sample at or after t + latency and stamped with that sample's time, as a receiver
+    with output latency is stamped by the autopilot that reads it."""
     if opts.imu_rates == "averaged" or opts.msg == "raw":
         # each message averages over its own (true) sample interval, like PX4's
         # integral over the last period: after a dropped sample it does not cover the gap
@@ -181,11 +186,13 @@ def _piece_frames(run: SimRun, mav: mavlink.MAVLink, opts: StreamOptions, rng: n
             lon = row[2] + math.degrees(noise[1] / (6.371e6 * max(math.cos(math.radians(row[1])), 1e-6)))
             vel = math.hypot(row[4], row[5])
             cog = (math.degrees(math.atan2(row[5], row[4])) + 360.0) % 360.0
-            out.append(mav.gps_raw_int_encode(
-                usec, 3, int(round(lat * 1e7)), int(round(lon * 1e7)), int(round((row[3] + noise[2]) * 1000)),
+            pending.append((t[i] + opts.gnss_latency, (
+                3, int(round(lat * 1e7)), int(round(lon * 1e7)), int(round((row[3] + noise[2]) * 1000)),
                 80, 120, int(round(vel * 100)), int(round(cog * 100)) % 36000, 12,
                 int(round((row[3] + noise[2]) * 1000)), 500, 800, 50, 100, 0,
-            ))
+            )))
+        while pending and pending[0][0] <= t[i] + 1e-9:  # due (within rounding of the sample grid)
+            out.append(mav.gps_raw_int_encode(usec, *pending.pop(0)[1]))
         if send_baro[i]:
             press = 1013.25 * (1 - 2.25577e-5 * row[3]) ** 5.25588 + rng.normal(0.0, 0.012)
             out.append(mav.scaled_pressure_encode(usec // 1000 % (2**32), press, 0.0, 2000, 0))
