@@ -240,8 +240,22 @@ def _table(result: AnalysisResult) -> str:
     return "\n".join(lines)
 
 
+PLOT_SIZE_IN, PLOT_DPI = (11.0, 7.0), 100  # analysis.png: 1100 x 700 pixels
+
+
 def _plot(path: Path, result: AnalysisResult) -> None:
-    """analysis.png: covariance 1-sigma (lines) and Monte Carlo sample sigma (dots)."""
+    """analysis.png: :func:`_figure` as a PNG."""
+    import matplotlib.pyplot as plt
+
+    fig = _figure(result)
+    fig.savefig(path, dpi=PLOT_DPI, format="png")
+    plt.close(fig)
+
+
+def _figure(result: AnalysisResult) -> object:
+    """Four panels (horizontal and vertical position, horizontal velocity, level attitude): the covariance
+    1-sigma (lines) and the Monte Carlo sample sigma (dots) against time from the start, in minutes when
+    the run is longer than 10 minutes."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -255,7 +269,7 @@ def _plot(path: Path, result: AnalysisResult) -> None:
               ("vertical position (m)", c[:, 2], m[:, 2]),
               ("horizontal velocity (m/s)", np.hypot(c[:, 3], c[:, 4]), np.hypot(m[:, 3], m[:, 4])),
               ("level attitude (deg)", np.hypot(c[:, 6], c[:, 7]), np.hypot(m[:, 6], m[:, 7])))
-    fig, axes = plt.subplots(2, 2, figsize=(11, 7), sharex=True)
+    fig, axes = plt.subplots(2, 2, figsize=PLOT_SIZE_IN, sharex=True)
     for ax, (title, cv, mv) in zip(axes.flat, panels):
         ax.plot(t, cv, label="covariance 1-sigma")
         ax.plot(t, mv, ".", markersize=3, label=f"Monte Carlo sigma ({result.runs} runs)")
@@ -265,8 +279,7 @@ def _plot(path: Path, result: AnalysisResult) -> None:
         ax.set_xlabel(f"time ({unit})")
     axes[0, 0].legend()
     fig.tight_layout()
-    fig.savefig(path, dpi=100, format="png")
-    plt.close(fig)
+    return fig
 
 
 def _have_matplotlib() -> bool:

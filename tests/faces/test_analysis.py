@@ -412,3 +412,181 @@ def test_covariance_matches_monte_carlo_with_every_source_and_the_vertical_held(
     lo, hi = chi_band(MC_RUNS - 1, 1e-3 / (len(rows) * len(cols)))
     ratio = result.montecarlo[rows][:, cols] / result.covariance[rows][:, cols]
     assert np.all((ratio > lo) & (ratio < hi)), (lo, hi, ratio)
+
+
+# --- the pieces of mavins/analysis.py, each against what it promises (fast: the mutation run's tests) ---------
+def test_grid_outputs_every_interval_in_whole_steps_of_whole_updates() -> None:
+    """make_grid: the output interval in whole strapdown updates, the propagation step the nearest divisor of it
+    to ``step``; Grid.every the steps per output row."""
+    g = an.make_grid(100.0, an.AnalysisOptions(every=1.0, step=0.1, samples=2))
+    assert (g.out_samples, g.step_samples, g.samples, g.every) == (100, 10, 2, 10)
+    g = an.make_grid(250.0, an.AnalysisOptions(every=1.0, step=0.3, samples=2))  # 250 / 75 -> 3, not a divisor: 2
+    assert (g.out_samples, g.step_samples, g.every) == (250, 125, 2)
+    g = an.make_grid(50.0, an.AnalysisOptions(every=0.01, step=0.1, samples=2))  # shorter than one update: one
+    assert (g.out_samples, g.step_samples, g.every) == (2, 2, 1)
+    g = an.make_grid(50.0, an.AnalysisOptions(every=1.0, step=5.0, samples=1))  # a step longer than the output
+    assert (g.out_samples, g.step_samples, g.every) == (50, 50, 1)
+    g = an.make_grid(10.0, an.AnalysisOptions(every=2.0, step=0.01, samples=2))  # steps below one sample: per sample
+    assert (g.out_samples, g.step_samples, g.every) == (20, 1, 20)
+
+
+def test_run_seeds_are_numpys_seed_sequence_of_seed_and_index() -> None:
+    """run_seeds(seed, i): the 64-bit seed of SeedSequence([seed, i])'s first two words (low, high), and a
+    generator on SeedSequence([seed, i, 1]): reproducible, different for every run and every seed."""
+    for seed, i in ((0, 0), (7, 3), (2**40, 99)):
+        st = np.random.SeedSequence([seed, i]).generate_state(2)
+        s, rng = an.run_seeds(seed, i)
+        assert s == int(st[0]) + (int(st[1]) << 32) and 0 <= s < 2**64
+        assert rng.standard_normal() == np.random.default_rng(np.random.SeedSequence([seed, i, 1])).standard_normal()
+    seeds = {an.run_seeds(s, i)[0] for s in range(3) for i in range(50)}
+    assert len(seeds) == 150
+
+
+def test_error_model_draws_each_runs_scale_and_misalignment_from_the_spec() -> None:
+    """error_model: the gyro triad takes the gyro figures and the accelerometer's its own; each run's scale
+    factors (ppm) and off-diagonal misalignments (rad) are N(0, 1-sigma) draws, the diagonal of the
+    misalignment zero. Over 4000 runs each sample sigma lies in its chi band (3999 dof, 1e-3 over the 24
+    compared, Wilson-Hilferty)."""
+    spec = cov.AnalysisSpec(em.ImuSpec(gyro_arw=1e-4, gyro_bias=2e-5, gyro_gm=3e-5, gyro_tau=40.0, gyro_rrw=4e-6,
+                                       accel_vrw=1e-3, accel_bias=2e-3, accel_gm=3e-3, accel_tau=90.0,
+                                       accel_rrw=4e-4),
+                            gyro_scale=1500e-6, accel_scale=400e-6, gyro_misalignment=2e-4, accel_misalignment=7e-4)
+    rng = np.random.default_rng(11)
+    models = [an.error_model(spec, rng) for _ in range(4000)]
+    m = models[0]
+    assert (m.gyro.turn_on_bias_sigma, m.gyro.bias_instability_sigma, m.gyro.bias_instability_tau,
+            m.gyro.random_walk, m.gyro.rate_random_walk) == (2e-5, 3e-5, 40.0, 1e-4, 4e-6)
+    assert (m.accel.turn_on_bias_sigma, m.accel.bias_instability_sigma, m.accel.bias_instability_tau,
+            m.accel.random_walk, m.accel.rate_random_walk) == (2e-3, 3e-3, 90.0, 1e-3, 4e-4)
+    lo, hi = chi_band(3999, 1e-3 / 24)
+    for triad, scale, mis in (("gyro", 1500.0, 2e-4), ("accel", 400.0, 7e-4)):
+        sf = np.array([getattr(x, triad).scale_factor_ppm for x in models])
+        mm = np.array([getattr(x, triad).misalignment for x in models])
+        assert np.all(mm[:, [0, 1, 2], [0, 1, 2]] == 0.0)
+        for s in np.std(sf, axis=0, ddof=1) / scale:
+            assert lo < s < hi, (triad, s)
+        off = mm[:, [0, 0, 1, 1, 2, 2], [1, 2, 0, 2, 0, 1]]
+        for s in np.std(off, axis=0, ddof=1) / mis:
+            assert lo < s < hi, (triad, s)
+
+
+STATIC_SC = load("static")
+EQUATOR_SC = type(STATIC_SC)("static_equator", STATIC_SC.source,
+                             {**STATIC_SC.doc, "start": {**STATIC_SC.doc["start"], "lat": 0.0}})
+
+
+@pytest.mark.parametrize("vertical", ["hold", "free"])
+def test_a_monte_carlo_run_is_the_strapdown_error_at_each_output_time(vertical: str) -> None:
+    """monte_carlo_run at rest on the equator with an accelerometer turn-on bias alone: row 0 zero, then one
+    row per second; the horizontal velocity error is b_h t and the position error b_h t^2/2 (the Schuler term
+    is (g/R) t^2/6 = 1e-5 relative over 6 s, and the equator has no vertical Earth rate to turn them), so
+    |dv| / t is the same at every row and |dp| / |dv| = t / 2 at the row's own time (a row taken one update
+    early or late breaks both by 0.02 / t); the vertical is zero with ``hold``; with ``free`` dp_D / dv_D =
+    t / 2 up to the Coriolis coupling of the east error, relative Omega t |b_E / b_D| / 3 (and the vertical
+    error reaches the east one likewise)."""
+    spec = cov.AnalysisSpec(em.ImuSpec(accel_bias=1e-3))
+    grid = an.make_grid(50.0, an.AnalysisOptions(every=1.0, samples=2))
+    err = an.monte_carlo_run(an.MonteCarloJob(EQUATOR_SC, 6.0, 50.0, spec, 3, 0, vertical, grid))
+    assert err.shape == (7, 9) and not err[0].any()
+    t = np.arange(1.0, 7.0)
+    dv = np.hypot(err[1:, 3], err[1:, 4])
+    dp = np.hypot(err[1:, 0], err[1:, 1])
+    assert dv[0] > 1e-4  # the drawn bias: 1e-3 m/s^2 per axis
+    # a free vertical feeds the east error through Coriolis (2 Omega dv_D): relative Omega t |b_D / b_h|
+    tol = 1e-4 + (2.0 * OMEGA * 6.0 * abs(err[1, 5]) / dv[0] if vertical == "free" else 0.0)
+    np.testing.assert_allclose(dv / t, dv[0], rtol=tol)
+    np.testing.assert_allclose(dp / dv, t / 2.0, rtol=tol)
+    if vertical == "hold":
+        assert np.all(np.abs(err[:, 2]) < 1e-9) and np.all(np.abs(err[:, 5]) < 1e-9)
+    else:
+        coupling = OMEGA * 6.0 * abs(err[1, 4] / err[1, 5]) / 3.0
+        np.testing.assert_allclose(err[1:, 2] / err[1:, 5], t / 2.0, rtol=2.0 * coupling + 1e-5)
+    assert np.all(np.abs(err[:, 6:9]) < 1e-7)  # no gyro error: the attitude stays (Earth-rate coupling only)
+
+
+def test_analyze_refuses_too_few_runs_and_too_short_a_run_and_reports_the_grid() -> None:
+    """analyze: fewer than 2 runs and a run shorter than one output interval are refused with one line each;
+    a short analysis reports one row per second from 0, the covariance and the runs zero at 0 (both start
+    from the truth), and the budget of every source and the total."""
+    spec = cov.AnalysisSpec(em.ImuSpec(accel_bias=1e-3, gyro_bias=1e-5))
+    with pytest.raises(ValueError, match=r"^--runs must be at least 2 \(a sample standard deviation\), got 1$"):
+        an.analyze(STATIC_SC, spec, an.AnalysisOptions(runs=1, duration=3.0))
+    with pytest.raises(ValueError, match=r"^0.5 s at 50 Hz is shorter than one output interval \(1 s\)$"):
+        an.analyze(STATIC_SC, spec, an.AnalysisOptions(runs=2, duration=0.5, rate=50.0))
+    res = an.analyze(STATIC_SC, spec, an.AnalysisOptions(runs=3, jobs=1, duration=3.0, rate=20.0))
+    np.testing.assert_allclose(res.t, [0.0, 1.0, 2.0, 3.0], atol=1e-12)
+    assert res.covariance.shape == res.montecarlo.shape == (4, 9) and res.runs == 3
+    assert not res.covariance[0].any() and not res.montecarlo[0].any()
+    assert np.all(res.covariance[-1, :2] > res.covariance[1, :2]) and np.all(res.montecarlo[-1, 3:5] > 0.0)
+    assert list(res.budget) == list(cov.SOURCES) + ["total"] and set(res.by_source) == set(cov.SOURCES)
+
+
+def test_duration_and_rate_come_from_the_options_then_the_scenario() -> None:
+    """--duration, else the scenario's [imu] duration, else its trajectory's length; --rate, else the
+    scenario's."""
+    assert an._duration_rate(STATIC_SC, an.AnalysisOptions()) == (600.0, 100.0)
+    assert an._duration_rate(STATIC_SC, an.AnalysisOptions(duration=5.0, rate=20.0)) == (5.0, 20.0)
+    from sim.scenarios import Scenario, build
+
+    doc = {k: v for k, v in STATIC_SC.doc.items() if k != "imu"}
+    doc["segments"] = [{"kind": "static", "duration": 42.0}]
+    bare = Scenario("bare", STATIC_SC.source, doc)
+    assert bare.duration is None
+    traj = build(bare)
+    assert an._duration_rate(bare, an.AnalysisOptions()) == (float(traj.t - traj.t0), 100.0) == (42.0, 100.0)
+
+
+def test_exact_run_is_made_once_per_scenario_and_length() -> None:
+    """exact_run keeps the scenario's exact increments: the same scenario and length give the same object, a
+    different length a different run."""
+    a = an.exact_run(STATIC_SC, 2.0, 50.0)
+    assert an.exact_run(STATIC_SC, 2.0, 50.0) is a
+    b = an.exact_run(STATIC_SC, 3.0, 50.0)
+    assert b is not a and len(b.t) == 150 and len(a.t) == 100
+
+
+def test_the_table_rows_have_the_printed_widths() -> None:
+    """_table: each row is the name in 24 columns, then pos_h, pos_v, vel_h (12 columns each) and the two
+    attitudes (13 each), four significant digits; the header names them."""
+    budget = {name: np.array([1.0, 0.123456, 12345.6, 2e-7, 90.0]) for name in cov.SOURCES}
+    budget["total"] = np.array([6.0, 7.0, 8.0, 9.0, 10.0])
+    result = an.AnalysisResult(np.array([0.0, 1.5]), np.zeros((2, 9)), np.zeros((2, 9)), budget, 2)
+    lines = an._table(result).splitlines()
+    assert lines[1] == ("source" + " " * 18 + "     pos_h m     pos_v m   vel_h m/s  att_lvl deg  att_yaw deg")
+    assert lines[2] == (cov.SOURCES[0].ljust(24) + "           1" + "      0.1235" + "   1.235e+04" + "        2e-07"
+                        + "           90")
+    assert len(lines) == 2 + len(cov.SOURCES) + 2 and lines[-2].startswith("total (covariance)      ")
+    assert lines[-1].startswith("Monte Carlo (2 runs)    ")
+
+
+@pytest.mark.skipif(not an._have_matplotlib(), reason="matplotlib is not installed (analysis.png is optional)")
+@pytest.mark.parametrize("span, unit", [(300.0, "s"), (3600.0, "min")])
+def test_the_plot_shows_each_panel_against_time(tmp_path: Path, span: float, unit: str) -> None:
+    """analysis.png: four panels, each the covariance 1-sigma (line) and the Monte Carlo sigma (dots) of one
+    quantity (horizontal and vertical position, horizontal velocity, level attitude: north and east as root
+    sum of squares), against time from the start in s, or in minutes beyond 10 minutes; 1100 x 700 pixels."""
+    t = np.linspace(100.0, 100.0 + span, 5)
+    c = np.arange(45.0).reshape(5, 9) + 1.0
+    m = c * 2.0
+    result = an.AnalysisResult(t, c, m, {}, 7)
+    fig = an._figure(result)
+    axes = fig.axes
+    assert [ax.get_title() for ax in axes] == ["horizontal position (m)", "vertical position (m)",
+                                               "horizontal velocity (m/s)", "level attitude (deg)"]
+    scale = 60.0 if unit == "min" else 1.0
+    for ax, (a, b) in zip(axes, ((0, 1), (2, None), (3, 4), (6, 7))):
+        line, dots = ax.get_lines()
+        np.testing.assert_allclose(line.get_xdata(), (t - 100.0) / scale)
+        want_c = c[:, a] if b is None else np.hypot(c[:, a], c[:, b])
+        want_m = m[:, a] if b is None else np.hypot(m[:, a], m[:, b])
+        np.testing.assert_allclose(line.get_ydata(), want_c)
+        np.testing.assert_allclose(dots.get_ydata(), want_m)
+        assert dots.get_linestyle() == "None" and dots.get_marker() == "." and dots.get_markersize() == 3
+    assert [ax.get_xlabel() for ax in axes[2:]] == [f"time ({unit})"] * 2
+    labels = [tx.get_text() for tx in axes[0].get_legend().get_texts()]
+    assert labels == ["covariance 1-sigma", "Monte Carlo sigma (7 runs)"]
+    png = tmp_path / "a.png"
+    an._plot(png, result)
+    data = png.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    assert (int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")) == (1100, 700)
