@@ -39,7 +39,10 @@ def cache_is_warm() -> bool:
     """Whether compiled kernels of this core version are already on disk: built at install
     (:mod:`mavins.core.aot`), or numba index files of strapdown.py, which every navigating
     command loads (the simulator's kernels share the folder and are compiled first by
-    ``mavins demo``: they do not count)."""
+    ``mavins demo``: they do not count). With numba's JIT disabled (NUMBA_DISABLE_JIT=1) nothing is
+    compiled, so there is nothing to wait for."""
+    if numba.config.DISABLE_JIT:
+        return True
     return aot.has_built("mavins.core") or any(Path(numba.config.CACHE_DIR).rglob("strapdown.*.nbi"))
 
 

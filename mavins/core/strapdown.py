@@ -41,6 +41,8 @@ constant), so the geographic kernel carries none of the others' branches.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import literally
 
@@ -89,55 +91,71 @@ ORDERS = {"1": 1, "2": 2, "3": 3, "4": 4, "exact": 0}
 GEOGRAPHIC, WANDER, FREE, INERTIAL = 0, 1, 2, 3
 FRAMES = {"geographic": GEOGRAPHIC, "wander": WANDER, "free": FREE, "inertial": INERTIAL}
 
-# --- state vector ---------------------------------------------------------
-S_T = 0  # time of the last k update (s)
-S_Q = 1  # q_nb [w x y z]
-S_C = 5  # C_b^n, row-major
-S_V = 14  # v^n (m/s) at k
-S_VP = 17  # v^n at the update before the last
-S_LATC = 20  # latitude (rad) of C_n^e, kept with it (sync_position)
-S_LONC = 21  # longitude (rad) of C_n^e, likewise
-# 22 unused
-S_CNE = 23  # C_n^e, row-major
-S_H = 32  # ellipsoidal height (m)
-S_PF = 33  # flat NED offset from the start (earth = none)
-S_LAT0 = 36  # initial latitude (rad)
-S_LON0 = 37  # initial longitude (rad)
-S_H0 = 38  # initial height (m)
-S_VD0 = 39  # initial down velocity (m/s)
-S_WIE = 40  # l-cycle Earth rate in n (rad/s)
-S_WEN = 43  # l-cycle transport rate in n (rad/s)
-S_G = 46  # l-cycle gravity down (m/s^2)
-S_G0 = 47  # gravity at the start (earth = none)
-S_NK = 48  # k updates done
-S_NJ = 49  # samples buffered in this k cycle
-S_BUFT = 50  # summed interval of the buffered samples (s)
-S_BTH = 51  # 6 x 3 angle increments buffer
-S_BDV = 69  # 6 x 3 velocity increments buffer
-S_CONE = 87  # recursive coning sum (sampled rates)
-S_SCUL = 90  # recursive sculling sum (sampled rates)
-S_ACCA = 93  # angle accumulated in this k cycle (sampled rates)
-S_ACCV = 96  # velocity accumulated in this k cycle (sampled rates)
-S_PW = 99  # previous rate sample w (sampled rates)
-S_PFO = 102  # previous force sample f (sampled rates)
-S_HAVEP = 105  # 1 once a previous rate sample exists
-S_TJ = 106  # time of the last accepted sample (s)
-S_NL = 107  # k cycles since the last l cycle
-S_KN = 108  # l-cycle 1/(R_N + h) (1/m): w_en^n = [v_E k_E, -v_N k_N, -v_E k_T]
-S_KE = 109  # l-cycle 1/(R_E + h) (1/m)
-S_KT = 110  # l-cycle tan L/(R_E + h) (1/m)
-S_MW = 111  # wander/free: l-cycle horizontal transport-rate matrix M (1/m), rho_h^w = M v_h^w, 2x2 row-major
-S_RZ = 115  # wander/free: l-cycle vertical transport rate (rad/s): 0 (wander), Omega sin L (free)
-S_RI = 116  # inertial: position r^i in ECI (m); S_V then holds v^i = dr^i/dt, S_C and S_Q C_b^i
-S_GH = 119  # inertial: l-cycle gravitation x, y in ECI (m/s^2); z is S_G
-S_T0 = 121  # inertial: time (s) at which ECI coincides with ECEF
-S_INI = 122  # inertial: 1 once the state is held in ECI
-S_FLAG = 123  # 1 once the geographic frame was asked to navigate beyond GEO_LAT_LIMIT
-S_FLAGT = 124  # time (s) of the update that first went beyond it
-S_GP = 125  # inertial: gravitation (m/s^2, ECI) of the last l cycle, before its quadrature term
-S_GPP = 128  # inertial: the same of the l cycle before
-S_GN = 131  # inertial: l cycles in that history (0, 1, 2)
-S_SIZE = 132
+# --- state vector: declared once -------------------------------------------
+class Slot(NamedTuple):
+    """A named run of the state vector ``s``: its name (``S_<NAME>`` is its first index), size and meaning."""
+
+    name: str
+    size: int
+    what: str
+
+
+STATE_LAYOUT = (
+    Slot("T", 1, "time of the last k update (s)"),
+    Slot("Q", 4, "q_nb [w x y z]"),
+    Slot("C", 9, "C_b^n, row-major"),
+    Slot("V", 3, "v^n (m/s) at k"),
+    Slot("VP", 3, "v^n at the update before the last"),
+    Slot("LATC", 1, "latitude (rad) of C_n^e, kept with it (sync_position)"),
+    Slot("LONC", 1, "longitude (rad) of C_n^e, likewise"),
+    Slot("CNE", 9, "C_n^e, row-major"),
+    Slot("H", 1, "ellipsoidal height (m)"),
+    Slot("PF", 3, "flat NED offset from the start (earth = none)"),
+    Slot("LAT0", 1, "initial latitude (rad)"),
+    Slot("LON0", 1, "initial longitude (rad)"),
+    Slot("H0", 1, "initial height (m)"),
+    Slot("VD0", 1, "initial down velocity (m/s)"),
+    Slot("WIE", 3, "l-cycle Earth rate in n (rad/s)"),
+    Slot("WEN", 3, "l-cycle transport rate in n (rad/s)"),
+    Slot("G", 1, "l-cycle gravity down (m/s^2)"),
+    Slot("G0", 1, "gravity at the start (earth = none)"),
+    Slot("NK", 1, "k updates done"),
+    Slot("NJ", 1, "samples buffered in this k cycle"),
+    Slot("BUFT", 1, "summed interval of the buffered samples (s)"),
+    Slot("BTH", 18, "6 x 3 angle increments buffer"),
+    Slot("BDV", 18, "6 x 3 velocity increments buffer"),
+    Slot("CONE", 3, "recursive coning sum (sampled rates)"),
+    Slot("SCUL", 3, "recursive sculling sum (sampled rates)"),
+    Slot("ACCA", 3, "angle accumulated in this k cycle (sampled rates)"),
+    Slot("ACCV", 3, "velocity accumulated in this k cycle (sampled rates)"),
+    Slot("PW", 3, "previous rate sample w (sampled rates)"),
+    Slot("PFO", 3, "previous force sample f (sampled rates)"),
+    Slot("HAVEP", 1, "1 once a previous rate sample exists"),
+    Slot("TJ", 1, "time of the last accepted sample (s)"),
+    Slot("NL", 1, "k cycles since the last l cycle"),
+    Slot("KN", 1, "l-cycle 1/(R_N + h) (1/m): w_en^n = [v_E k_E, -v_N k_N, -v_E k_T]"),
+    Slot("KE", 1, "l-cycle 1/(R_E + h) (1/m)"),
+    Slot("KT", 1, "l-cycle tan L/(R_E + h) (1/m)"),
+    Slot("MW", 4, "wander/free: l-cycle horizontal transport-rate matrix M (1/m), rho_h^w = M v_h^w, 2x2 row-major"),
+    Slot("RZ", 1, "wander/free: l-cycle vertical transport rate (rad/s): 0 (wander), Omega sin L (free)"),
+    Slot("RI", 3, "inertial: position r^i in ECI (m); S_V then holds v^i = dr^i/dt, S_C and S_Q C_b^i"),
+    Slot("GH", 2, "inertial: l-cycle gravitation x, y in ECI (m/s^2); z is S_G"),
+    Slot("T0", 1, "inertial: time (s) at which ECI coincides with ECEF"),
+    Slot("INI", 1, "inertial: 1 once the state is held in ECI"),
+    Slot("FLAG", 1, "1 once the geographic frame was asked to navigate beyond GEO_LAT_LIMIT"),
+    Slot("FLAGT", 1, "time (s) of the update that first went beyond it"),
+    Slot("GP", 3, "inertial: gravitation (m/s^2, ECI) of the last l cycle, before its quadrature term"),
+    Slot("GPP", 3, "inertial: the same of the l cycle before"),
+    Slot("GN", 1, "inertial: l cycles in that history (0, 1, 2)"),
+)
+S_OFFSET = {f.name: sum(g.size for g in STATE_LAYOUT[:i]) for i, f in enumerate(STATE_LAYOUT)}
+S_SIZE = sum(f.size for f in STATE_LAYOUT)
+# the fields' first indices as module constants, in STATE_LAYOUT's order (numba takes module-level ints as
+# compile-time constants; tests/core/test_strapdown.py checks each S_<NAME> against S_OFFSET)
+(S_T, S_Q, S_C, S_V, S_VP, S_LATC, S_LONC, S_CNE, S_H, S_PF, S_LAT0, S_LON0, S_H0, S_VD0, S_WIE, S_WEN, S_G,
+ S_G0, S_NK, S_NJ, S_BUFT, S_BTH, S_BDV, S_CONE, S_SCUL, S_ACCA, S_ACCV, S_PW, S_PFO, S_HAVEP, S_TJ, S_NL,
+ S_KN, S_KE, S_KT, S_MW, S_RZ, S_RI, S_GH, S_T0, S_INI, S_FLAG, S_FLAGT, S_GP, S_GPP, S_GN) = \
+    (S_OFFSET[f.name] for f in STATE_LAYOUT)
 
 # The geographic frame's transport rate has -v_E tan L/(R_E + h) in its vertical component:
 # beyond this latitude (55 km from a pole) it is clamped there and the state flagged, since

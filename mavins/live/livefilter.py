@@ -190,8 +190,9 @@ class LiveFilter:
         return kalman.gyro_bias_total(self.bias)
 
     def body_rate(self, w: tuple) -> tuple[float, float, float]:
-        """A raw gyro reading (rad/s, body) corrected by the estimates (kalman.correct_gyro3)."""
-        return kalman.correct_gyro3(self.bias, float(w[0]), float(w[1]), float(w[2]), 1.0)
+        """A raw gyro reading (rad/s, body) corrected by the estimates (kalman.correct_gyro3), as floats."""
+        x, y, z = kalman.correct_gyro3(self.bias, float(w[0]), float(w[1]), float(w[2]), 1.0)
+        return float(x), float(y), float(z)
 
     @property
     def accel_bias(self) -> np.ndarray:

@@ -867,7 +867,7 @@ def test_init_state_slots():
     there (Somigliana) and 1/(R_N + h), which places the first update's mid-interval latitude."""
     v = np.array([3.0, -4.0, 0.5])
     s = sd.init_state(2.5, LAT0, LON0, H0, v, *ATT)
-    assert s.shape == (132,) and s[sd.S_T] == 2.5 and s[sd.S_TJ] == 2.5
+    assert s.shape == (131,) and s[sd.S_T] == 2.5 and s[sd.S_TJ] == 2.5
     c = cbn(*ATT)
     np.testing.assert_allclose(s[sd.S_C:sd.S_C + 9], c.ravel(), rtol=0, atol=4e-16)
     np.testing.assert_allclose(dcm_of_quat(s[sd.S_Q:sd.S_Q + 4]), c, rtol=0, atol=1e-15)
@@ -1033,3 +1033,23 @@ def test_inertial_gravitation_second_difference():
     want = gs[2] + (gs[2] - 2 * gs[1] + gs[0]) / 24
     # the geodetic round trip of r to an ulp of |r| (1e-9 m) moves G by 2 gamma/a of it: 3e-15 m/s^2
     np.testing.assert_allclose([s[sd.S_GH], s[sd.S_GH + 1], s[sd.S_G]], want, rtol=0, atol=2e-14)
+
+
+def test_the_state_layout_is_declared_once() -> None:
+    """strapdown.STATE_LAYOUT is the one declaration of the state vector: each S_<NAME> is its slot's running
+    offset, the slots tile 0 .. S_SIZE without gap or overlap, and the sizes are those of what they hold
+    (a quaternion 4, a DCM 9, six 3-vectors of increments 18, the 2 x 2 transport-rate matrix 4)."""
+    names = [f.name for f in sd.STATE_LAYOUT]
+    assert len(set(names)) == len(names)
+    at = 0
+    for f in sd.STATE_LAYOUT:
+        assert getattr(sd, f"S_{f.name}") == sd.S_OFFSET[f.name] == at, f.name
+        at += f.size
+    assert at == sd.S_SIZE == 131
+    size = {f.name: f.size for f in sd.STATE_LAYOUT}
+    assert (size["Q"], size["C"], size["CNE"], size["BTH"], size["BDV"], size["MW"], size["GH"]) == (4, 9, 9, 18, 18,
+                                                                                                     4, 2)
+    assert all(size[n] == 3 for n in ("V", "VP", "PF", "WIE", "WEN", "CONE", "SCUL", "ACCA", "ACCV", "PW", "PFO",
+                                      "RI", "GP", "GPP"))
+    exported = sorted(k for k in vars(sd) if k.startswith("S_") and k not in ("S_SIZE", "S_OFFSET"))
+    assert exported == sorted(f"S_{n}" for n in names)  # no offset typed outside the declaration
