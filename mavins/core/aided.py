@@ -91,6 +91,7 @@ FILTER_COLUMNS = (
     "sigma_bg_x", "sigma_bg_y", "sigma_bg_z",
     "sigma_ba_x", "sigma_ba_y", "sigma_ba_z",
 )  # fmt: skip
+FILTER_GROUPS = ("sigma_pos", "sigma_vel", "sigma_att", "bg", "ba", "sigma_bg", "sigma_ba")  # FILTER_COLUMNS by 3
 OUT_COLUMNS = sd.OUT_COLUMNS + FILTER_COLUMNS
 OUT_SIZE = len(OUT_COLUMNS)  # 35: the contract's 14 solution and 21 filter columns
 STATE_BLOCKS = ("SG", "SA", "MG", "MA", "MB")  # errmodel.STATE blocks after the contract's columns, where estimated
@@ -594,6 +595,19 @@ def to_file_units(rows: np.ndarray, columns: Sequence[str] | None = None) -> np.
     names the rows' columns (default: the first of ROW_COLUMNS)."""
     names = ROW_COLUMNS[: rows.shape[1]] if columns is None else columns
     return rows * unit_factors(names)
+
+
+def column_groups(columns: Sequence[str]) -> tuple[tuple[str, tuple[str, ...], tuple[int, ...]], ...]:
+    """The filter's columns among ``columns`` grouped by quantity (the Rerun recording's ``/filter/<name>``):
+    the contract's 21 in threes (FILTER_GROUPS), then each STATE_BLOCKS block's estimate and 1-sigma
+    (``sg``, ``sigma_sg``, ``mg``, ...); each as (name, its column names, their indices in ``columns``), only
+    the groups whose columns are all there."""
+    where = {c: i for i, c in enumerate(columns)}
+    groups = [(g, FILTER_COLUMNS[3 * k:3 * k + 3]) for k, g in enumerate(FILTER_GROUPS)]
+    for b in STATE_BLOCKS:
+        for p in ("", "sigma_"):
+            groups.append((f"{p}{b.lower()}", tuple(f"{p}{b.lower()}_{a}" for a in _BLOCK[b].labels)))
+    return tuple((g, names, tuple(where[c] for c in names)) for g, names in groups if all(c in where for c in names))
 
 
 def file_columns(spec: np.ndarray, mag_bias: float) -> np.ndarray:

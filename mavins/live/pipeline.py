@@ -80,6 +80,12 @@ class Pipeline:
         f = self.engine.filter
         return aided.file_columns(f.spec, f.settings.sigma_mag_bias)
 
+    @functools.cached_property
+    def _recorded_groups(self) -> tuple[tuple[tuple[str, tuple[str, ...], tuple[int, ...]], ...], np.ndarray]:
+        """The filter's column groups of this run's file row (aided.column_groups) and the row's factors to
+        file units (aided.unit_factors), for the recording."""
+        return aided.column_groups(self.columns), aided.unit_factors(self.columns)
+
     def file_row(self, out: Solution) -> np.ndarray:
         """The row of ``columns`` for an output set (kernel units), the filter's state as of it."""
         if not self.engine_cfg.filter.aiding:
@@ -156,6 +162,8 @@ class Pipeline:
                 rec.on_output(r, out.origin, local_ned(float(r[1]), float(r[2]), float(r[3]), out.origin))
                 if out.unc is not None:
                     rec.on_filter(float(r[0]), out.unc)
+                    groups, factors = self._recorded_groups
+                    rec.on_states(float(r[0]), groups, self.file_row(out) * factors)
                 self._outputs += 1
                 if self._outputs % 50 == 1:
                     counts = {f"rejected_{k}": v for k, v in self.ingest.rejected.items()}

@@ -143,6 +143,7 @@ class Recorder:
         self.rec.send_blueprint(blueprint(), make_active=True, make_default=True)
         self.live = live
         self._buf: dict[str, list[tuple[float, float, list[float]]]] = defaultdict(list)
+        self._state_series: set[str] = set()  # /filter/<name> entities whose series names were logged
         self._traj: list[list[float]] = []
         self._gnss: list[list[float]] = []
         self._traj_stride = 1
@@ -174,7 +175,6 @@ class Recorder:
             "/health/sample_interval": (["sample interval (ms)"], [[150, 150, 150]]),
             "/health/output_rate": (["output rate (Hz)"], [[100, 200, 200]]),
             "/health/latency": (["processing latency (ms)"], [[220, 120, 220]]),
-            "/filter/sigma_pos": (["1-sigma north", "1-sigma east", "1-sigma down"], XYZ),
             "/filter/test_ratios": (["position", "velocity", "height", "magnetometer"],
                                     [[0, 170, 255], [230, 60, 60], [60, 170, 60], [200, 160, 0]]),
             "/errors/position_3sigma": (["3-sigma horizontal (published)"], [[150, 150, 150]]),
@@ -281,13 +281,23 @@ class Recorder:
         self.rec.log("/log", rr.TextLog(text, level=lvl))
 
     def on_filter(self, t: float, unc: object) -> None:
-        """The filter's 1-sigma position (m), test ratios and the published horizontal 3-sigma
-        (docs/filter.md); a ratio not measured yet is left out."""
+        """The filter's test ratios and the published horizontal 3-sigma (docs/filter.md); a ratio not
+        measured yet is left out. (Its sigmas and estimates come with :meth:`on_states`.)"""
         sig = unc.sigma_pos  # type: ignore[attr-defined]
-        self._push("/filter/sigma_pos", t, [float(x) for x in sig])
         ratios = [unc.pos_ratio, unc.vel_ratio, unc.hgt_ratio, unc.mag_ratio]  # type: ignore[attr-defined]
         self._push("/filter/test_ratios", t, [float(r) if math.isfinite(r) else 0.0 for r in ratios])
         self._push("/errors/position_3sigma", t, [3.0 * math.sqrt(0.5 * (sig[0] ** 2 + sig[1] ** 2))])
+
+    def on_states(self, t: float, groups: tuple, row: np.ndarray) -> None:
+        """The filter's estimates and 1-sigma in file units, one series entity ``/filter/<name>`` per group of
+        columns (core.aided.column_groups: name, column names, indices into ``row``), named after its
+        columns, whatever states the run estimates."""
+        for name, names, idx in groups:
+            path = f"/filter/{name}"
+            if path not in self._state_series:
+                self._state_series.add(path)
+                self.rec.log(path, self.rr.SeriesLines(names=list(names)), static=True)
+            self._push(path, t, [float(row[i]) for i in idx])
 
     def on_gnss(self, t: float, ned: np.ndarray) -> None:
         """A GNSS fix (NED m from the origin), shown as a point in the 3D view (at most

@@ -494,13 +494,16 @@ def test_imus_are_fused_before_the_engine():
 class FullRecorder(FakeRecorder):
     def __init__(self):
         super().__init__()
-        self.outputs, self.filters, self.counters, self.fdi = [], [], [], []
+        self.outputs, self.filters, self.counters, self.fdi, self.states = [], [], [], [], []
 
     def on_output(self, row, origin, ned):
         self.outputs.append((row, origin, tuple(ned)))
 
     def on_filter(self, t, unc):
         self.filters.append((t, unc))
+
+    def on_states(self, t, groups, row):
+        self.states.append((t, groups, row.copy()))
 
     def on_counters(self, t, counters):
         self.counters.append((t, dict(counters)))
@@ -529,7 +532,11 @@ def test_outputs_filter_and_counters_are_recorded():
     unc = object()
     sols = []
 
+    from mavins.live.livefilter import FilterSettings, LiveFilter
+
     class Engine(FakeEngine):
+        filter = LiveFilter(FilterSettings())
+
         def on_imu(self, smp):
             if len(sols) == 2:
                 sols.append(None)
@@ -540,6 +547,7 @@ def test_outputs_filter_and_counters_are_recorded():
 
     p = pl.Pipeline(EngineConfig())
     p.engine = Engine()
+    p.engine.filter.bias[0] = 1e-5
     p.engine.counters = {"gaps_bridged": 2, "restarts": 0}
     p.recorder = FullRecorder()
     p.handle(highres(1_000_000))
@@ -554,6 +562,13 @@ def test_outputs_filter_and_counters_are_recorded():
         assert ned == pytest.approx((10.0, 5.0, -7.0), abs=1e-4)
     assert rec.filters == [(s.row[0], unc) for s in out if s.unc is not None]
     assert len(rec.filters) == 26
+    # with each filter output, the filter's columns grouped by quantity (aided.column_groups) in file units:
+    # here a fresh filter (zero covariance and biases) with a gyro bias of 1e-5 rad/s = 2.063 deg/h on x
+    assert [t for t, _, _ in rec.states] == [t for t, _ in rec.filters]
+    t, groups, row = rec.states[-1]
+    assert [g for g, _, _ in groups] == ["sigma_pos", "sigma_vel", "sigma_att", "bg", "ba", "sigma_bg", "sigma_ba"]
+    assert groups[3] == ("bg", ("bg_x", "bg_y", "bg_z"), (23, 24, 25))
+    assert row[23] == pytest.approx(1e-5 * 180.0 / math.pi * 3600.0, rel=1e-12) and not row[24:].any()
     assert [t for t, _ in rec.counters] == [out[0].row[0], out[50].row[0]]
     assert rec.counters[0][1] == {"gaps_bridged": 2}  # the duplicate came after the first output
     assert rec.counters[1][1] == {"rejected_duplicate_time": 1, "gaps_bridged": 2}

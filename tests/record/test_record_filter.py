@@ -49,12 +49,22 @@ def test_recording_holds_the_filter(tmp_path: Path) -> None:
     assert len(data["/world/gnss"]) >= 1  # fixes drawn in the 3D view
 
 
-def test_the_demo_estimates_the_units_scale_factors() -> None:
+def test_the_demo_estimates_the_units_scale_factors(tmp_path: Path) -> None:
     """``mavins demo --scale-factors`` on the industrial flight: the service's filter estimates the six scale
     factors of the simulated unit (sim.errors.grade, 1000, -700, 400 ppm per triad) and each ends within 3 of
-    its sigma, which the report shows; the gyro z one, seen in the turns, below its 1000 ppm prior."""
-    report = run_demo("flight", duration=90.0, speed=None, grade="industrial", rerun_path=None, gnss_outage=None,
+    its sigma, which the report shows; the gyro z one, seen in the turns, below its 1000 ppm prior. The
+    recording holds every estimated group of the filter's columns as ``/filter/<name>`` (file units), the
+    scale factors among them, and no group the run does not estimate."""
+    rrd = tmp_path / "sf.rrd"
+    report = run_demo("flight", duration=90.0, speed=None, grade="industrial", rerun_path=rrd, gnss_outage=None,
                       scale_factors=True)
+    data = _scalars(rrd)
+    groups = {p for p in data if p.startswith("/filter/")} - {"/filter/test_ratios"}
+    assert groups == {"/filter/" + g for g in ("sigma_pos", "sigma_vel", "sigma_att", "bg", "ba", "sigma_bg", "sigma_ba", "sg",
+                                                 "sigma_sg", "sa", "sigma_sa")}
+    sig = np.array(data["/filter/sigma_sg"])
+    assert sig.shape[1] == 3 and np.allclose(sig[0], 1000.0, rtol=1e-3) and np.all(sig[-1] <= sig[0])
+    np.testing.assert_allclose(np.array(data["/filter/sg"])[-1], [e for _, e, _, _ in report.scale[:3]], atol=5.0)
     assert [n for n, *_ in report.scale] == ["gyro x", "gyro y", "gyro z", "accel x", "accel y", "accel z"]
     assert [t for *_, t in report.scale] == [1000.0, -700.0, 400.0] * 2
     for name, est, sig, true in report.scale:
