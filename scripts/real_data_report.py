@@ -301,7 +301,7 @@ def main(argv: list[str] | None = None) -> int:
                          "commit, for a before/after table; default: this one)")
     args = ap.parse_args(argv)
     if args.defaults:
-        if not (args.code / "mavins" / "cli.py").is_file():
+        if not ((args.code / "mavins" / "cli.py").is_file() or (args.code / "mavins" / "cli").is_dir()):
             print(f"real_data_report: error: {args.code}: no mavins checkout there", file=sys.stderr)
             return EXIT_USAGE
         print(defaults_table(args.code.resolve()))

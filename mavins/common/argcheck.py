@@ -1,5 +1,5 @@
 """Option values checked at parse time, shared by the ``mavins`` command line
-(cli.py) and the modules that also run on their own (record/review.py).
+(mavins/cli/) and the modules that also run on their own (record/review.py).
 
 Light on purpose: ``mavins --help`` imports it.
 """

@@ -1,0 +1,7 @@
+"""``python -m mavins.cli``: the ``mavins`` console script."""
+
+import sys
+
+from . import main
+
+sys.exit(main())
