@@ -442,8 +442,31 @@ def test_the_misalignments_are_estimated_only_when_asked() -> None:
     assert (on.gyro_misalignment, on.accel_misalignment) == pytest.approx((36.0 * em.ARCSEC, 72.0 * em.ARCSEC),
                                                                           rel=1e-12)
     assert on.gyro_scale == 0.0
-    with pytest.raises(ValueError, match=r"^--misalignment with an IMU spec needs gyro_misalignment and/or "):
+    with pytest.raises(ValueError, match=r"^--misalignment with an IMU spec needs gyro_misalignment and/or "
+                                         r"accel_misalignment \(arcsec\) in it$"):
         em.spec_of({"gyro_arw": 0.1}, misalignment=True)
+    # one of the two keys is enough, whatever its size (1 arcsec is 4.8e-6 rad)
+    assert em.spec_of({"accel_misalignment": 1.0}, misalignment=True).accel_misalignment == pytest.approx(em.ARCSEC)
+    assert em.spec_of({"gyro_misalignment": 1.0}, misalignment=True).gyro_misalignment == pytest.approx(em.ARCSEC)
     sp = em.make_spec("industrial", misalignment=True)  # 0.05 deg (core/grades.py)
     assert sp[em.SP_GYRO_MIS] == pytest.approx(0.05 * DEG, rel=1e-3) and sp[em.SP_ACC_MIS] == sp[em.SP_GYRO_MIS]
     assert em.ARCSEC == pytest.approx(math.pi / 648000.0, rel=1e-15)
+
+
+def test_filter_row_writes_each_estimated_block_and_its_sigma_under_its_names() -> None:
+    """aided.filter_row on a ROW_SIZE row: after the contract's 35 columns every STATE_BLOCKS block's
+    estimate (the bias vector's value) and 1-sigma (root of P's diagonal), at the columns that name them
+    (``sg_x`` ... ``sigma_mg_zy`` ... ``sigma_mb_z``), each value distinct so that no column can take
+    another's."""
+    names = {"SG": "xyz", "SA": "xyz", "MG": ["xy", "xz", "yx", "yz", "zx", "zy"],
+             "MA": ["xy", "xz", "yx", "yz", "zx", "zy"], "MB": "xyz"}
+    bias = np.arange(kf.B_SIZE, dtype=float) + 0.5
+    P = np.diag((np.arange(em.NX, dtype=float) + 1.0) ** 2)
+    out = np.zeros(aided.ROW_SIZE)
+    aided.filter_row(P, bias, out)
+    col = {c: i for i, c in enumerate(aided.ROW_COLUMNS)}
+    for blk, axes in names.items():
+        x0 = getattr(em, f"X_{blk}")
+        for i, a in enumerate(axes):
+            assert out[col[f"{blk.lower()}_{a}"]] == bias[x0 - em.X_SENSORS + i], (blk, a)
+            assert out[col[f"sigma_{blk.lower()}_{a}"]] == x0 + i + 1.0, (blk, a)

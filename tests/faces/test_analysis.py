@@ -581,7 +581,11 @@ def test_the_plot_shows_each_panel_against_time(tmp_path: Path, span: float, uni
         want_m = m[:, a] if b is None else np.hypot(m[:, a], m[:, b])
         np.testing.assert_allclose(line.get_ydata(), want_c)
         np.testing.assert_allclose(dots.get_ydata(), want_m)
+        np.testing.assert_allclose(dots.get_xdata(), (t - 100.0) / scale)
         assert dots.get_linestyle() == "None" and dots.get_marker() == "." and dots.get_markersize() == 3
+        grid = ax.xaxis.get_gridlines()[0]
+        assert grid.get_visible() and grid.get_alpha() == 0.3
+    assert all(axes[0].get_shared_x_axes().joined(axes[0], ax) for ax in axes[1:])  # one time axis
     assert [ax.get_xlabel() for ax in axes[2:]] == [f"time ({unit})"] * 2
     labels = [tx.get_text() for tx in axes[0].get_legend().get_texts()]
     assert labels == ["covariance 1-sigma", "Monte Carlo sigma (7 runs)"]
@@ -590,3 +594,118 @@ def test_the_plot_shows_each_panel_against_time(tmp_path: Path, span: float, uni
     data = png.read_bytes()
     assert data[:8] == b"\x89PNG\r\n\x1a\n"
     assert (int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")) == (1100, 700)
+
+
+
+@pytest.mark.skipif(not an._have_matplotlib(), reason="matplotlib is not installed (analysis.png is optional)")
+@pytest.mark.parametrize("t, unit", [
+    ([500.0, 600.0, 700.0], "s"),  # 200 s, not 1200: the span is last minus first
+    ([0.0, 400.0, 800.0, 1200.0, 3600.0], "min"),  # the last time, not the second
+    ([0.0, 100.0, 200.0, 300.0, 400.0, 500.0, 700.0], "min"),  # from the first time to the last
+    ([0.0, 300.0, 600.0], "s"),  # exactly 10 minutes: seconds still
+    ([0.0, 300.0, 600.5], "min"),
+])
+def test_the_plot_turns_to_minutes_beyond_ten_minutes_of_span(t: list[float], unit: str) -> None:
+    """_figure's time axis: minutes when the last output time is more than 600 s after the first."""
+    n = len(t)
+    result = an.AnalysisResult(np.array(t), np.ones((n, 9)), np.ones((n, 9)), {}, 2)
+    fig = an._figure(result)
+    assert fig.axes[2].get_xlabel() == f"time ({unit})"
+    np.testing.assert_allclose(fig.axes[0].get_lines()[0].get_xdata(),
+                               (np.array(t) - t[0]) / (60.0 if unit == "min" else 1.0))
+
+
+def test_the_table_reports_the_last_output_time_and_row() -> None:
+    """_table: the header's time and the Monte Carlo row are those of the last output row, not the second."""
+    budget = {name: np.ones(5) for name in cov.SOURCES + ("total",)}
+    mc = np.zeros((3, 9))
+    mc[1] = 1.0
+    mc[2] = [3.0, 4.0, 12.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.7]
+    lines = an._table(an.AnalysisResult(np.array([0.0, 1.0, 2.0]), np.zeros((3, 9)), mc, budget, 5)).splitlines()
+    assert lines[0] == "error budget at t = 2 s (1-sigma, each source alone)"
+    assert [float(v) for v in lines[-1].split(")")[1].split()] == pytest.approx([5.0, 12.0, 0.0, 0.0, 0.7])
+
+
+SHORT_SC = type(STATIC_SC)("static_short", STATIC_SC.source,
+                           {**STATIC_SC.doc, "imu": {"rate": 20.0, "duration": 3.0}})
+LAB_SC = type(STATIC_SC)("static_lab", STATIC_SC.source,
+                         {**STATIC_SC.doc, "imu": {"rate": 20.0, "duration": 3.0, "earth": "none"}})
+
+
+def test_analyze_takes_the_scenarios_length_and_rate_and_reports_the_last_row_budget() -> None:
+    """With neither --duration nor --rate the scenario's [imu] gives them (3 s at 20 Hz: rows at 0, 1, 2, 3 s);
+    a run of exactly one output interval is analysed; the budget is that of the last row, each source's
+    and the total's (core/covariance.budget_row of the covariance printed in the last row)."""
+    spec = cov.AnalysisSpec(em.ImuSpec(accel_bias=1e-3, gyro_bias=1e-5))
+    res = an.analyze(SHORT_SC, spec, an.AnalysisOptions(runs=2, jobs=1))
+    np.testing.assert_allclose(res.t, [0.0, 1.0, 2.0, 3.0], atol=1e-12)
+    c = res.covariance[-1]
+    np.testing.assert_allclose(res.budget["total"], [math.hypot(c[0], c[1]), c[2], math.hypot(c[3], c[4]),
+                                                     math.hypot(c[6], c[7]), c[8]], rtol=1e-12)
+    for name, P in res.by_source.items():
+        d = np.sqrt(np.maximum(np.diagonal(P[-1]), 0.0))
+        assert res.budget[name][1] == pytest.approx(d[8], rel=1e-12, abs=1e-300), name
+    one = an.analyze(SHORT_SC, spec, an.AnalysisOptions(runs=2, jobs=1, duration=1.0))  # 20 samples: one interval
+    np.testing.assert_allclose(one.t, [0.0, 1.0], atol=1e-12)
+    many = an.analyze(SHORT_SC, spec, an.AnalysisOptions(runs=2, jobs=1, every=0.2))  # more rows than 9 columns
+    assert many.covariance.shape == many.montecarlo.shape == (16, 9)
+
+
+@pytest.mark.parametrize("vertical", ["free", "hold"])
+def test_in_the_laboratory_the_covariance_and_the_runs_are_the_closed_form(vertical: str) -> None:
+    """A scenario with ``earth = "none"`` (no Earth rate, gravity model or curvature): with an accelerometer
+    turn-on bias sigma_b alone, the covariance of each horizontal velocity is sigma_b t and of position
+    sigma_b t^2/2 exactly (F^3 = 0 on bias -> dv -> dp, so the second-order transition is exact), the held
+    vertical is zero; each Monte Carlo run's horizontal error is b t and b t^2/2 (velocity to round-off), at
+    the output times of ``samples = 1`` (one update per sample), the same for a second call (its own seed)."""
+    sb = 1e-3
+    spec = cov.AnalysisSpec(em.ImuSpec(accel_bias=sb))
+    opts = an.AnalysisOptions(runs=2, jobs=1, vertical=vertical, samples=1)
+    grid, by_source, t = an.covariance_part(LAB_SC, spec, opts)
+    np.testing.assert_allclose(t, [0.0, 1.0, 2.0, 3.0], atol=1e-12)
+    P = by_source["accel_bias"]
+    np.testing.assert_allclose(np.sqrt(P[:, 3, 3]), sb * t, rtol=1e-12)
+    np.testing.assert_allclose(np.sqrt(P[:, 6, 6]), sb * t ** 2 / 2.0, rtol=1e-12)
+    assert (np.all(P[:, 5, 5] == 0.0) and np.all(P[:, 8, 8] == 0.0)) == (vertical == "hold")
+    job = an.MonteCarloJob(LAB_SC, 3.0, 20.0, spec, 5, 1, vertical, grid)
+    err = an.monte_carlo_run(job)
+    assert np.array_equal(err, an.monte_carlo_run(job))  # the run's seed, not a fresh one
+    b = err[1, 3:5]
+    np.testing.assert_allclose(err[1:, 3:5], np.outer(t[1:], b), rtol=1e-9, atol=1e-15)
+    # position rows pass through latitude and longitude (radii at the start) and back (radii at the truth):
+    # 1e-6 relative between the two conversions, far below a row one update off (1/20 s: 3 % at 3 s)
+    np.testing.assert_allclose(err[1:, 0:2], np.outer(t[1:] ** 2 / 2.0, b), rtol=1e-5)
+
+
+def test_error_models_draw_every_misalignment_element_on_its_own() -> None:
+    """The six off-diagonal misalignment elements of a run are independent draws: over 4000 runs the sample
+    correlation of any two is within 0.1 of zero (its standard deviation is 1/sqrt(4000) = 0.016)."""
+    spec = cov.AnalysisSpec(em.ImuSpec(), gyro_misalignment=1e-3)
+    rng = np.random.default_rng(12)
+    off = np.array([np.asarray(an.error_model(spec, rng).gyro.misalignment)[[0, 0, 1, 1, 2, 2], [1, 2, 0, 2, 0, 1]]
+                    for _ in range(4000)])
+    corr = np.corrcoef(off.T)
+    assert np.all(np.abs(corr[~np.eye(6, dtype=bool)]) < 0.1), corr
+
+
+def test_run_analyze_writes_the_budget_values_and_refuses_to_overwrite_the_scenario(tmp_path: Path) -> None:
+    """budget.csv: one row per source and the total, each value the budget's own double (repr, comma
+    separated); an output that is the scenario file itself is refused, naming it SCENARIO, and nothing is
+    written."""
+    spec = cov.AnalysisSpec(em.ImuSpec(accel_bias=1e-3, gyro_bias=1e-5))
+    out = tmp_path / "out"
+    an.run_analyze(SHORT_SC, spec, out, an.AnalysisOptions(runs=2, jobs=1))
+    rows = (out / "budget.csv").read_text(encoding="utf-8").splitlines()
+    res = an.analyze(SHORT_SC, spec, an.AnalysisOptions(runs=2, jobs=1))
+    for row, name in zip(rows[1:], list(cov.SOURCES) + ["total"]):
+        got = row.split(",")
+        assert got[0] == name and [float(v) for v in got[1:]] == [float(v) for v in res.budget[name]]
+    victim = tmp_path / "out2" / "budget.csv"
+    victim.parent.mkdir()
+    victim.write_text(Path(STATIC_SC.source).read_text())
+    inside = type(STATIC_SC)("in_out", str(victim), SHORT_SC.doc)
+    from mavins.common.files import DataFileError
+
+    with pytest.raises(DataFileError, match=r"is also the input SCENARIO"):
+        an.run_analyze(inside, spec, victim.parent, an.AnalysisOptions(runs=2, jobs=1))
+    assert sorted(p.name for p in victim.parent.iterdir()) == ["budget.csv"]
