@@ -596,6 +596,23 @@ def _serve_in_thread(svc) -> tuple[threading.Event, threading.Thread, list[BaseE
     return stop, th, failure
 
 
+def _serve_a_stream(svc, svc_port: int, client: Client, tee: Tee, command: list[str]) -> None:  # type: ignore[no-untyped-def]
+    """Serve ``svc`` in a thread while ``command`` (``mavins sim ... --stream`` to the relay) runs, until the
+    service has read and answered everything (quiesce); then stop it and close the relay and the client."""
+    stop, th, failure = _serve_in_thread(svc)
+    try:
+        sim = subprocess.run(command, env=ENV, capture_output=True, text=True, timeout=READY_TIMEOUT_S)
+        assert sim.returncode == 0, sim.stderr
+        quiesce(tee, svc_port, client)
+    finally:
+        stop.set()
+        th.join(EVENT_TIMEOUT_S)
+        tee.close()
+        client.close()
+    assert not failure, f"service thread died: {failure[0]!r}"
+    assert not th.is_alive()
+
+
 def test_in_process_service_waits_for_gps_and_takes_its_origin() -> None:
     """No --lat/--lon/--alt: WAITING until the vehicle's GPS_RAW_INT, then the origin is that fix."""
     from mavins.live.livefilter import FilterSettings
@@ -609,19 +626,7 @@ def test_in_process_service_waits_for_gps_and_takes_its_origin() -> None:
     svc = Service(EngineConfig(heading=30.0, align=2.0, gyro_bias="none", filter=FilterSettings(aiding=())), IngestConfig(),
                   ServiceConfig(master=f"udpin:127.0.0.1:{svc_port}", outs=[f"udpout:127.0.0.1:{client.port}"],
                                 compid=197))
-    stop, th, failure = _serve_in_thread(svc)
-    try:
-        sim = subprocess.run(sim_command(tee.port, scenario="static", duration=6.0, speed=10), env=ENV,
-                             capture_output=True, text=True, timeout=READY_TIMEOUT_S)
-        assert sim.returncode == 0, sim.stderr
-        quiesce(tee, svc_port, client)
-    finally:
-        stop.set()
-        th.join(EVENT_TIMEOUT_S)
-        tee.close()
-        client.close()
-    assert not failure, f"service thread died: {failure[0]!r}"
-    assert not th.is_alive()
+    _serve_a_stream(svc, svc_port, client, tee, sim_command(tee.port, scenario="static", duration=6.0, speed=10))
     pub = by_type(client.msgs)
     truth = truth_from(tee.upstream)
     texts = [m.text for m in pub["STATUSTEXT"]]
@@ -768,18 +773,8 @@ def _late_gnss_run(latency_ms: int, delay_ms: int) -> tuple[np.ndarray, np.ndarr
                                filter=FilterSettings(aiding=("gnss",), delays=delays)),
                   IngestConfig(), ServiceConfig(master=f"udpin:127.0.0.1:{svc_port}",
                                                 outs=[f"udpout:127.0.0.1:{client.port}"]))
-    stop, th, failure = _serve_in_thread(svc)
-    try:
-        sim = subprocess.run(sim_command(tee.port, "--gnss-latency", str(latency_ms), duration=70.0, speed=10),
-                             env=ENV, capture_output=True, text=True, timeout=READY_TIMEOUT_S)
-        assert sim.returncode == 0, sim.stderr
-        quiesce(tee, svc_port, client)
-    finally:
-        stop.set()
-        th.join(EVENT_TIMEOUT_S)
-        tee.close()
-        client.close()
-    assert not failure, f"service thread died: {failure[0]!r}"
+    _serve_a_stream(svc, svc_port, client, tee,
+                    sim_command(tee.port, "--gnss-latency", str(latency_ms), duration=70.0, speed=10))
     truth = truth_from(tee.upstream)
     pairs = [(m, s) for m, s in at_truth(by_type(client.msgs)["GLOBAL_POSITION_INT"], truth)
              if m.time_boot_ms >= 1000 * (ALIGN_S + 20.0)]
