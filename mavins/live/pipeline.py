@@ -268,10 +268,11 @@ GNSS_YAW_SIGMA_DEG = 1.0  # deg: 1-sigma of a GNSS heading whose message gives n
 
 
 def gnss_heading(msg: object) -> tuple[float, float] | None:
-    """The heading of a dual-antenna receiver in GPS_RAW_INT / GPS2_RAW (common.xml): ``yaw`` in cdeg
-    from true north, clockwise, 0 = not available and 36000 = north; ``hdg_acc`` its 1-sigma in degE5
-    (0: unknown, GNSS_YAW_SIGMA_DEG). Returns (rad, rad) in (-pi, pi], or None."""
-    if msg.get_type() not in ("GPS_RAW_INT", "GPS2_RAW"):  # type: ignore[attr-defined]
+    """The heading of a dual-antenna receiver in GPS_RAW_INT, GPS2_RAW or GPS_INPUT (common.xml): ``yaw`` in
+    cdeg from true north, clockwise, 0 = not available and 36000 = north; ``hdg_acc`` its 1-sigma in degE5
+    (0: unknown; GPS_INPUT has none: GNSS_YAW_SIGMA_DEG). Returns (rad, rad) in (-pi, pi], or None.
+    (A GPS_INPUT this service publishes never comes back here: the pipeline drops its own component's.)"""
+    if msg.get_type() not in ("GPS_RAW_INT", "GPS2_RAW", "GPS_INPUT"):  # type: ignore[attr-defined]
         return None
     y = getattr(msg, "yaw", 0)
     if not 0 < y <= 36000:

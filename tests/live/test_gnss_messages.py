@@ -135,9 +135,22 @@ def test_dual_antenna_heading_in_cdeg_from_north(name: str, yaw: int, deg: float
 
 
 def test_no_heading_when_the_receiver_has_none() -> None:
-    """yaw 0 is 'not available'; above 36000 is no heading; a GPS_INPUT carries no hdg_acc here."""
+    """yaw 0 is 'not available'; above 36000 is no heading."""
     from mavins.live.pipeline import gnss_heading
 
     assert gnss_heading(_raw_yaw(0)) is None and gnss_heading(_raw_yaw(36001)) is None
-    assert gnss_heading(_decoded(ENC.gps_input_encode(5_000_000, 0, 0, 0, 0, 3, LAT, LON, 488.0, 1.0, 1.0,
-                                                      0.0, 0.0, 0.0, 0.3, 1.0, 2.0, 10, yaw=9000))) is None
+
+
+@pytest.mark.parametrize("yaw, deg", [(36000, 0.0), (9000, 90.0), (27050, -89.5)])
+def test_gps_input_heading_in_cdeg_with_the_default_sigma(yaw: int, deg: float) -> None:
+    """GPS_INPUT's ``yaw`` (common.xml: cdeg from true north, 0 not available, 36000 north) is a heading too;
+    the message has no accuracy for it, so its 1-sigma is the 1 deg default; yaw 0 is none."""
+    from mavins.live.pipeline import gnss_heading
+
+    def gps_input(y: int):  # type: ignore[no-untyped-def]
+        return _decoded(ENC.gps_input_encode(5_000_000, 0, 0, 0, 0, 3, LAT, LON, 488.0, 1.0, 1.0, 0.0, 0.0, 0.0,
+                                             0.3, 1.0, 2.0, 10, yaw=y))
+
+    h = gnss_heading(gps_input(yaw))
+    assert h is not None and abs(math.degrees(h[0]) - deg) < 1e-9 and abs(math.degrees(h[1]) - 1.0) < 1e-12
+    assert gnss_heading(gps_input(0)) is None
