@@ -68,6 +68,7 @@ class StreamOptions:
     imus: int = 1  # 1..3; extra IMUs: HIGHRES_IMU id 1, 2 (highres) or SCALED_IMU2/3 (raw)
     gnss_outages: tuple[tuple[float, float], ...] = ()  # (start, end) s of sensor time without GPS_RAW_INT
     gnss_latency: float = 0.0  # s: each GNSS fix is sent this long after it was measured, stamped when sent
+    gnss_heading: float = 0.0  # rad: 1-sigma of a dual-antenna heading in GPS_RAW_INT (yaw, hdg_acc); 0 = none
     mag_rate: float = 0.0  # Hz of magnetometer samples in HIGHRES_IMU id 0 (0 = none)
     mag: MagConfig = MagConfig()  # the field and the sensor's noise
 
@@ -97,17 +98,19 @@ def frames(run: SimRun | Iterable[SimRun], mav: mavlink.MAVLink, opts: StreamOpt
     pieces of sim.generate.generate_chunks (each piece's messages made as it arrives)."""
     rng = np.random.default_rng(opts.seed + 1)
     mag_rng = np.random.default_rng([opts.seed, 0x6E3])  # apart from the GPS/baro noise
+    heading_rng = np.random.default_rng([opts.seed, 0x4EAD])  # the dual-antenna heading's, likewise
     last: dict[str, float | None] = {}
     pending: list[tuple[float, tuple]] = []  # GNSS fixes measured, not yet sent (gnss_latency), across pieces
     whole = isinstance(run, SimRun)
     for piece in ([run] if whole else run):
         if not whole and len(piece.extra) < opts.imus - 1:
             raise ValueError(f"streaming {opts.imus} IMUs from pieces: make them with generate_chunks(imus={opts.imus})")
-        yield from _piece_frames(piece, mav, opts, rng, mag_rng, last, pending)
+        yield from _piece_frames(piece, mav, opts, rng, mag_rng, heading_rng, last, pending)
 
 
 def _piece_frames(run: SimRun, mav: mavlink.MAVLink, opts: StreamOptions, rng: np.random.Generator,
-                  mag_rng: np.random.Generator, last: dict[str, float | None], pending: list[tuple[float, tuple]]
+                  mag_rng: np.random.Generator, heading_rng: np.random.Generator, last: dict[str, float | None],
+                  pending: list[tuple[float, tuple]]
                   ) -> Iterator[tuple[float, list[mavlink.MAVLink_message]]]:
     """frames() of one run or piece; ``last`` carries the periods of the message rates between pieces,
     ``pending`` the GNSS fixes measured but not yet due (``opts.gnss_latency``): a fix measured at t is sent
@@ -186,10 +189,15 @@ def _piece_frames(run: SimRun, mav: mavlink.MAVLink, opts: StreamOptions, rng: n
             lon = row[2] + math.degrees(noise[1] / (6.371e6 * max(math.cos(math.radians(row[1])), 1e-6)))
             vel = math.hypot(row[4], row[5])
             cog = (math.degrees(math.atan2(row[5], row[4])) + 360.0) % 360.0
+            yaw_cd, hdg_acc = 0, 100  # no dual-antenna heading (yaw 0: not available)
+            if opts.gnss_heading > 0.0:  # the vehicle's true yaw plus N(0, sigma); 36000 for north, 0 = none
+                yaw = math.degrees(math.radians(row[16]) + opts.gnss_heading * heading_rng.standard_normal())
+                yaw_cd = int(round(yaw * 100.0)) % 36000 or 36000
+                hdg_acc = int(round(math.degrees(opts.gnss_heading) * 1e5))
             pending.append((t[i] + opts.gnss_latency, (
                 3, int(round(lat * 1e7)), int(round(lon * 1e7)), int(round((row[3] + noise[2]) * 1000)),
                 80, 120, int(round(vel * 100)), int(round(cog * 100)) % 36000, 12,
-                int(round((row[3] + noise[2]) * 1000)), 500, 800, 50, 100, 0,
+                int(round((row[3] + noise[2]) * 1000)), 500, 800, 50, hdg_acc, yaw_cd,
             )))
         while pending and pending[0][0] <= t[i] + 1e-9:  # due (within rounding of the sample grid)
             out.append(mav.gps_raw_int_encode(usec, *pending.pop(0)[1]))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
@@ -55,6 +56,9 @@ def _add_sim(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--gnss-latency", type=_real(0.0, 1000.0), default=0.0, metavar="MS",
                    help="with --stream: each GPS_RAW_INT is sent this long after its fix was measured and stamped "
                         "when sent, as an autopilot stamps a receiver's late output (test run's --gnss-delay)")
+    p.add_argument("--gnss-heading", type=_real(0.0, 30.0), default=0.0, metavar="SIGMA_DEG",
+                   help="with --stream: GPS_RAW_INT carries a dual-antenna heading (yaw, hdg_acc), the vehicle's "
+                        "true yaw plus this 1-sigma noise (deg; default 0: none)")
     p.add_argument("--mag-rate", type=_real(0.0, 100.0), default=0.0, metavar="HZ",
                    help="magnetometer samples per second written to mag.csv, or streamed in HIGHRES_IMU (0 = none; "
                         "the World Magnetic Model's field at the start on --date, 0.3 uT noise; docs/simulator.md)")
@@ -129,7 +133,8 @@ def _cmd_sim(args: argparse.Namespace) -> int:
             stats = stream(itertools.chain([run], pieces), args.stream,
                            StreamOptions(msg=args.msg, imu_rates=args.imu_rates, speed=speed, sysid=args.sysid,
                                          imus=args.imus, seed=args.seed, gnss_outages=outages,
-                                         gnss_latency=args.gnss_latency / 1000.0, mag_rate=args.mag_rate,
+                                         gnss_latency=args.gnss_latency / 1000.0,
+                                         gnss_heading=math.radians(args.gnss_heading), mag_rate=args.mag_rate,
                                          mag=_sim_mag(MagConfig, run, args)),
                            progress=bar)
     except (ValueError, OSError) as exc:  # a piece that could not be made, or the link

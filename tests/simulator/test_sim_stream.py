@@ -541,6 +541,38 @@ def test_gnss_latency_sends_each_fix_late_and_stamps_it_when_sent(scenario_dir) 
     assert [(t, m.time_usec, m.lat) for t, m in pieces] == [(t, m.time_usec, m.lat) for t, m in late]
 
 
+def test_gnss_heading_is_the_vehicles_yaw_plus_its_stated_noise(scenario_dir) -> None:
+    """StreamOptions.gnss_heading (``--gnss-heading SIGMA_DEG``): each GPS_RAW_INT's ``yaw`` (cdeg, 36000 for
+    north, 0 never) is the vehicle's true yaw plus N(0, sigma) and ``hdg_acc`` states sigma in degE5; the
+    errors' sample sigma lies in its chi band (two-sided 1e-3); the fixes themselves are those of a stream
+    without it (their noise is drawn apart); without it ``yaw`` is 0, not available."""
+    sc = load(str(scenario_dir / "moving.toml"))
+    run = generate(sc, duration=300.0, grade="ideal", seed=2, usec_grid=True)
+
+    def gps(opts: StreamOptions) -> list[tuple[float, object]]:
+        mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
+        return [(t, m) for t, ms in frames(run, mav, opts) for m in ms if m.get_type() == "GPS_RAW_INT"]
+
+    sigma = 0.5
+    with_h = gps(StreamOptions(speed=None, gnss_heading=math.radians(sigma)))
+    plain = gps(StreamOptions(speed=None))
+    assert [(m.lat, m.lon, m.alt, m.vel, m.cog) for _, m in with_h] == [(m.lat, m.lon, m.alt, m.vel, m.cog)
+                                                                          for _, m in plain]
+    assert all(m.yaw == 0 for _, m in plain)
+    assert all(0 < m.yaw <= 36000 and m.hdg_acc == 50000 for _, m in with_h)
+    truth = run.exact.truth
+    t_all = np.concatenate(([run.exact.t0], run.exact.t))
+    true = np.interp([t for t, _ in with_h], t_all, np.unwrap(np.radians(truth[:, 16])))
+    err = np.degrees(np.angle(np.exp(1j * (np.radians([m.yaw / 100.0 for _, m in with_h]) - true))))
+    n = len(err)
+    assert n > 1000
+    c_lo, c_hi = 2.0 / (9.0 * (n - 1)), 3.290526731491926  # Wilson-Hilferty; z of 1e-3 two-sided
+    lo = math.sqrt((1.0 - c_lo - c_hi * math.sqrt(c_lo)) ** 3)
+    hi = math.sqrt((1.0 - c_lo + c_hi * math.sqrt(c_lo)) ** 3)
+    assert lo < np.std(err, ddof=1) / sigma < hi, np.std(err, ddof=1)
+    assert abs(np.mean(err)) < 4.0 * sigma / math.sqrt(n)
+
+
 def test_stream_sends_before_the_last_piece_is_made(scenario_dir) -> None:
     """stream() of pieces sends the first piece's messages while the next ones are still being made: the
     pieces' source here refuses to make its last piece until a message has arrived at the receiver, so a
