@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import os
 import sys
 import time
 from dataclasses import dataclass, field
@@ -13,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from .common import files
+from .common.fleet import Outcome, batch_outputs, write_summary
 from .core.settings import Strapdown
 
 
@@ -340,28 +340,17 @@ def _strapdown_seconds(imu: np.ndarray, init: dict, opts: NavOptions) -> float:
     return time.perf_counter() - t0
 
 
-def batch_outputs(imu_paths: list[Path], out_dir: Path) -> list[Path]:
-    """Where ``--each`` writes each file's solution: ``OUT_DIR/<its folder relative to the
-    inputs' common folder>/<name>.nav.csv`` (``.nav.parquet`` for a parquet input)."""
-    resolved = [p.resolve() for p in imu_paths]
-    common = Path(os.path.commonpath([p.parent for p in resolved]))
-    outs = []
-    for p in resolved:
-        base = p.name.split(".")[0]
-        ext = ".parquet" if p.suffix == ".parquet" else ".csv"
-        outs.append(out_dir / p.parent.relative_to(common) / f"{base}.nav{ext}")
-    if len(set(outs)) != len(outs):
-        raise files.DataFileError("--each: two IMU files would write the same solution (same folder and name)")
-    return outs
-
-
-def _batch_job(job: tuple[Path, Path, Path, NavOptions]) -> tuple[int, str | None]:
-    """One file of a batch: (rows written, None) or (0, the one-line error)."""
+def _batch_job(job: tuple[Path, Path, Path, NavOptions]) -> Outcome:
+    """One file of a batch: its outcome (common/fleet.py), with the solution's rows, or the one-line error."""
     imu, init, out, opts = job
+    outcome = Outcome(str(imu), str(out))
     try:
-        return run_nav(imu, init, out, opts), None
+        outcome.solution_rows = run_nav(imu, init, out, opts)
     except (files.DataFileError, files.ResourceError, ValueError, OSError) as exc:
-        return 0, str(exc)
+        outcome.error = str(exc)
+    else:
+        outcome.state = "done"
+    return outcome
 
 
 def _warm(opts: NavOptions) -> None:
@@ -377,13 +366,14 @@ def _warm(opts: NavOptions) -> None:
 
 
 def run_nav_batch(imu_paths: list[Path], init_path: Path | None, out_dir: Path, opts: NavOptions,
-                  jobs: int | None = None) -> list[tuple[Path, Path, int, str | None]]:
-    """``mavins nav --each``: every IMU file navigated on its own, on ``jobs`` processes.
+                  jobs: int | None = None, cluster: str | None = None) -> tuple[list[Outcome], Path]:
+    """``mavins nav --each``: every IMU file navigated on its own, on ``jobs`` local processes or the Dask
+    cluster at ``cluster``, then ``OUT_DIR/summary.csv`` (common/fleet.py).
 
     Each file's initial state is ``init_path`` or, without it, the ``init.json``
     beside the file (what ``mavins sim`` writes). A bad file does not stop the
-    others: its error comes back in its row of the result
-    ``(imu, solution, rows, error or None)``; each solution is written atomically.
+    others: its error comes back in its outcome; each solution is written atomically.
+    Returns the outcomes, in the order of the files, and the summary's path.
     """
     from .common.parallel import run_jobs
 
@@ -394,6 +384,6 @@ def run_nav_batch(imu_paths: list[Path], init_path: Path | None, out_dir: Path, 
     _warm(opts)  # compiled (or loaded) once here; the forked workers inherit it
     jobs_list = [(imu, init, out, dataclasses.replace(opts, timing=False))
                  for imu, init, out in zip(imu_paths, inits, outs)]
-    results = run_jobs(_batch_job, jobs_list, jobs=min(jobs or len(jobs_list), len(jobs_list)),
-                       label="mavins nav --each")
-    return [(imu, out, rows, err) for (imu, _, out, _), (rows, err) in zip(jobs_list, results)]
+    outcomes = run_jobs(_batch_job, jobs_list, jobs=min(jobs or len(jobs_list), len(jobs_list)), cluster=cluster,
+                        label="mavins nav --each")
+    return outcomes, write_summary(out_dir, outcomes)

@@ -36,6 +36,7 @@ from .core.gpstime import unix_of_gps
 from .core.records import Solution
 from .live.engine import EngineConfig
 from .common.files import FOUND, DataFileError, SolutionWriter, sniff
+from .common.fleet import Outcome, batch_outputs, write_summary
 from .live.imuset import DISCOVERY_S
 from .link.ingest import HIGHRES_ACC_GYRO, HIGHRES_MAG, IMU_MESSAGES, IngestConfig
 from .link import publish
@@ -800,6 +801,63 @@ def replay(
             raise DataFileError(_no_solution(path, engine_cfg, pipeline, t_first))
     last = pipeline.last_sample
     return ReplayResult(n_msg, n_out, pipeline, report, t_first, last.t if last is not None else None, aiding)
+
+
+def replay_outcome(job: tuple[Path, Path, EngineConfig, IngestConfig]) -> Outcome:
+    """One log of ``mavins replay --each``: replayed into its solution file (:func:`replay`), summed up as a
+    row of summary.csv (common/fleet.py); a log that cannot be read or gives no solution has its one-line
+    error there and no file, and so has one that breaks the reader in a way nobody foresaw (its exception's
+    type and text), so that the batch goes on. ``worst_ratio`` is the largest test ratio published."""
+    log, out, engine_cfg, ingest_cfg = job
+    outcome = Outcome(str(log), str(out))
+    seen: dict[str, object] = {"worst": math.nan, "sigma": None}
+
+    def watch(sol: Solution, _pipeline: Pipeline) -> None:
+        unc = sol.unc
+        if unc is None:
+            return
+        seen["sigma"] = tuple(float(x) for x in unc.sigma_pos)
+        for r in (unc.pos_ratio, unc.vel_ratio, unc.hgt_ratio, unc.mag_ratio):
+            if math.isfinite(r) and not r <= seen["worst"]:  # type: ignore[operator]
+                seen["worst"] = float(r)
+
+    try:
+        res = replay(log, engine_cfg, ingest_cfg, out, on_output=watch)
+    except (files.DataFileError, files.ResourceError, ValueError, OSError) as exc:
+        outcome.error = str(exc)
+        return outcome
+    except Exception as exc:  # noqa: BLE001 - reported in the log's row, the other logs go on
+        outcome.error = f"{log}: {type(exc).__name__}: {exc}"
+        return outcome
+    eng = res.pipeline.engine
+    c = eng.filter.counters
+    outcome.duration_s = (res.t_last - res.t_first) if res.t_first is not None and res.t_last is not None \
+        else math.nan
+    outcome.samples = res.pipeline.ingest.accepted
+    outcome.solution_rows = res.outputs
+    outcome.gnss_accepted = c["gnss_pos_accepted"] + c["gnss_vel_accepted"]
+    outcome.gnss_rejected = c["gnss_pos_rejected"] + c["gnss_vel_rejected"]
+    outcome.worst_ratio = float(seen["worst"])  # type: ignore[arg-type]
+    if seen["sigma"] is not None:
+        outcome.sigma = seen["sigma"]  # type: ignore[assignment]
+    outcome.state = eng.state.value
+    return outcome
+
+
+def replay_each(logs: list[Path], out_dir: Path, engine_cfg: EngineConfig, ingest_cfg: IngestConfig,
+                jobs: int | None = None, cluster: str | None = None) -> tuple[list[Outcome], Path]:
+    """``mavins replay --each LOG... -o DIR``: each log on its own into ``DIR/.../<name>.nav.csv``
+    (common/fleet.batch_outputs), on ``jobs`` local processes or the Dask cluster at ``cluster``; then
+    ``DIR/summary.csv``, one row per log in the order given. Returns the outcomes and the summary's path."""
+    from .common.parallel import run_jobs
+
+    outs = batch_outputs(logs, out_dir)
+    for log, out in zip(logs, outs):
+        files.check_outputs({"-o": out}, {"LOG": log})
+    items = [(log, out, engine_cfg, ingest_cfg) for log, out in zip(logs, outs)]
+    outcomes = run_jobs(replay_outcome, items, jobs=min(jobs or len(items), len(items)), cluster=cluster,
+                        label="mavins replay --each")
+    return outcomes, write_summary(out_dir, outcomes)
 
 
 def _locate(report: LogReport, done: int, pipeline: Pipeline) -> int:

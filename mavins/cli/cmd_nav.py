@@ -31,6 +31,9 @@ def _add_nav(sub: argparse._SubParsersAction) -> None:
                         "OUTPUT/<folder>/<name>.nav.csv, a bad file is reported and the others go on")
     b.add_argument("--jobs", type=_positive_int(1, 1024), default=None, metavar="N",
                    help="with --each: worker processes (default: every core)")
+    b.add_argument("--cluster", metavar="ADDRESS",
+                   help="with --each: run on the Dask cluster at ADDRESS (e.g. tcp://scheduler:8786) instead; "
+                        "OUTPUT/summary.csv gets one row per file either way")
     _strapdown_options(p)
     g = p.add_argument_group("aided navigation (with --gnss, --baro, --mag and/or --rest; docs/filter.md)")
     g.add_argument("--gnss", type=Path, metavar="GNSS.csv",
@@ -66,9 +69,11 @@ def _cmd_nav(args: argparse.Namespace) -> int:
     opts = NavOptions(input=args.input, strapdown=strapdown_from_options(args), timing=args.timing)
     if args.each:
         return _cmd_nav_each(args, opts)
-    if args.jobs is not None:
-        print("mavins nav: error: --jobs goes with --each (several files, each navigated on its own)", file=sys.stderr)
-        return EXIT_USAGE
+    for given, name in ((args.jobs, "--jobs"), (args.cluster, "--cluster")):
+        if given is not None:
+            print(f"mavins nav: error: {name} goes with --each (several files, each navigated on its own)",
+                  file=sys.stderr)
+            return EXIT_USAGE
     if args.init is None:
         print("mavins nav: error: --init INIT.json is required (the initial state)", file=sys.stderr)
         return EXIT_USAGE
@@ -109,18 +114,20 @@ def _cmd_nav_each(args: argparse.Namespace, opts: object) -> int:
               file=sys.stderr)
         return EXIT_USAGE
     try:
-        results = run_nav_batch(args.imu, args.init, args.output, opts, jobs=args.jobs)  # type: ignore[arg-type]
-    except (files.DataFileError, files.ResourceError, ValueError) as exc:
+        outcomes, summary = run_nav_batch(args.imu, args.init, args.output, opts,  # type: ignore[arg-type]
+                                          jobs=args.jobs, cluster=args.cluster)
+    except (files.DataFileError, files.ResourceError, ValueError, ImportError) as exc:
         print(f"mavins nav: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     failed = 0
-    for _imu, out, rows, err in results:
-        if err is None:
-            print(f"mavins nav: wrote {rows} solution rows to {out}", file=sys.stderr)
+    for o in outcomes:
+        if not o.error:
+            print(f"mavins nav: wrote {o.solution_rows} solution rows to {o.output}", file=sys.stderr)
         else:
             failed += 1
-            print(f"mavins nav: error: {err}", file=sys.stderr)
-    print(f"mavins nav: {len(results) - failed} of {len(results)} files navigated", file=sys.stderr)
+            print(f"mavins nav: error: {o.error}", file=sys.stderr)
+    print(f"mavins nav: {len(outcomes) - failed} of {len(outcomes)} files navigated; summary in {summary}",
+          file=sys.stderr)
     return EXIT_USAGE if failed else 0
 
 

@@ -6,22 +6,47 @@ import argparse
 import sys
 from pathlib import Path
 
-from .options import EXIT_USAGE, _apply_config, _engine_config, _ingest_config, _nav_options, _say, _subparser
+from .options import (
+    EXIT_USAGE, _apply_config, _engine_config, _ingest_config, _nav_options, _positive_int, _say, _subparser,
+)
 
 
 def _add_replay(sub: argparse._SubParsersAction) -> None:
     p = _subparser(sub, "replay", "run the service pipeline over a log (.tlog, ArduPilot .bin, PX4 .ulg)",
                    "Replay a recorded log through the same pipeline as 'mavins run', as fast as possible, "
                    "writing each output set as a solution row (same results as live).")
-    p.add_argument("log", type=Path, metavar="LOG", help=".tlog, .bin or .ulg")
-    p.add_argument("-o", "--output", type=Path, required=True, metavar="NAV.csv", help="solution CSV to write")
+    p.add_argument("log", type=Path, nargs="+", metavar="LOG", help=".tlog, .bin or .ulg (several with --each)")
+    p.add_argument("-o", "--output", type=Path, required=True, metavar="NAV.csv",
+                   help="solution CSV to write; with --each a folder")
     p.add_argument("--rerun", type=Path, metavar="FILE.rrd", help="also write a Rerun recording")
+    b = p.add_argument_group("fleet (many logs, each on its own)")
+    b.add_argument("--each", action="store_true",
+                   help="replay every LOG on its own: each solution goes to OUTPUT/<folder>/<name>.nav.csv and "
+                        "OUTPUT/summary.csv gets one row per log (duration, samples, GNSS accepted/rejected, worst "
+                        "test ratio, final sigmas, final state, error); a bad log is reported in its row and the "
+                        "others go on (exit 2 if any failed)")
+    b.add_argument("--jobs", type=_positive_int(1, 1024), default=None, metavar="N",
+                   help="with --each: worker processes (default: every core)")
+    b.add_argument("--cluster", metavar="ADDRESS",
+                   help="with --each: run on the Dask cluster at ADDRESS (e.g. tcp://scheduler:8786) instead")
     _nav_options(p)
     p.set_defaults(func=_cmd_replay, parser=p)
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
     _apply_config(args, args.parser)
+    if args.each:
+        return _cmd_replay_each(args)
+    for given, name in ((args.jobs, "--jobs"), (args.cluster, "--cluster")):
+        if given is not None:
+            print(f"mavins replay: error: {name} goes with --each (several logs, each replayed on its own)",
+                  file=sys.stderr)
+            return EXIT_USAGE
+    if len(args.log) > 1:
+        print(f"mavins replay: error: {len(args.log)} logs given: replay them with --each (one solution per log "
+              "in the -o folder)", file=sys.stderr)
+        return EXIT_USAGE
+    args.log = args.log[0]
     from ..common.files import DataFileError, ResourceError, check_outputs
     from ..replay import replay
 
@@ -45,3 +70,33 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     lines = res.report.lines() if res.report is not None else ()
     _say("replay", (("" if ln.split(": ", 1)[-1].startswith("note:") else "warning: ") + ln for ln in lines))
     return 0
+
+
+def _cmd_replay_each(args: argparse.Namespace) -> int:
+    """``mavins replay --each LOG... -o DIR``: every log on its own, then DIR/summary.csv; exit 2 if any failed."""
+    from ..common.files import DataFileError, ResourceError
+    from ..replay import replay_each
+
+    if args.rerun is not None:
+        print("mavins replay: error: --rerun records one log; with --each replay the log of interest on its own",
+              file=sys.stderr)
+        return EXIT_USAGE
+    if args.output.exists() and not args.output.is_dir():
+        print(f"mavins replay: error: {args.output}: with --each, -o names a folder", file=sys.stderr)
+        return EXIT_USAGE
+    try:
+        outcomes, summary = replay_each(args.log, args.output, _engine_config(args), _ingest_config(args),
+                                        jobs=args.jobs, cluster=args.cluster)
+    except (DataFileError, ResourceError, ValueError, ImportError) as exc:
+        print(f"mavins replay: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    failed = [o for o in outcomes if o.error]
+    for o in outcomes:
+        if o.error:
+            print(f"mavins replay: error: {o.error}", file=sys.stderr)
+        else:
+            print(f"mavins replay: {o.solution_rows} solution rows to {o.output}; final state {o.state}",
+                  file=sys.stderr)
+    print(f"mavins replay: {len(outcomes) - len(failed)} of {len(outcomes)} logs replayed; summary in {summary}",
+          file=sys.stderr)
+    return EXIT_USAGE if failed else 0

@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 
 from mavins import cli, nav
+from mavins.common.fleet import SUMMARY_COLUMNS
 from mavins.core.settings import Strapdown
 from mavins.common.files import DataFileError
 from support import gamma
@@ -473,7 +474,7 @@ def test_batch_outputs_mirror_the_folders(tmp_path: Path) -> None:
                                                  out / "c.nav.parquet"]
     with pytest.raises(DataFileError) as err:
         nav.batch_outputs([a, tmp_path / "r" / "a" / "imu.csv.gz"], out)
-    assert str(err.value) == "--each: two IMU files would write the same solution (same folder and name)"
+    assert str(err.value) == "--each: two inputs would write the same solution (same folder and name)"
 
 
 def test_run_nav_batch_in_process(tmp_path: Path) -> None:
@@ -488,20 +489,28 @@ def test_run_nav_batch_in_process(tmp_path: Path) -> None:
     write_init(d2)
     err = io.StringIO()
     with contextlib.redirect_stderr(err):
-        res = nav.run_nav_batch([d1 / "imu.csv", d2 / "imu.csv"], None, tmp_path / "out",
-                                opts(earth_model="none", timing=True), jobs=1)
+        res, summary = nav.run_nav_batch([d1 / "imu.csv", d2 / "imu.csv"], None, tmp_path / "out",
+                                         opts(earth_model="none", timing=True), jobs=1)
     assert not any(ln.startswith("timing") for ln in err.getvalue().splitlines())
-    assert [r[:3] for r in res] == [(d1 / "imu.csv", tmp_path / "out" / "r1" / "imu.nav.csv", 10),
-                                    (d2 / "imu.csv", tmp_path / "out" / "r2" / "imu.nav.csv", 0)]
-    assert res[0][3] is None
-    assert res[1][3] == (f"{d2 / 'imu.csv'}: line 2, column 't': first increment time 1.0 is not after the initial "
-                         "state's t = 1.0 (row i covers (t[i-1], t[i]])")
-    _, sol = table(res[0][1])
+    out1 = tmp_path / "out" / "r1" / "imu.nav.csv"
+    assert [(o.input, o.output, o.solution_rows) for o in res] == [
+        (str(d1 / "imu.csv"), str(out1), 10), (str(d2 / "imu.csv"), str(tmp_path / "out" / "r2" / "imu.nav.csv"), 0)]
+    assert res[0].error == "" and res[0].state == "done"
+    bad = (f"{d2 / 'imu.csv'}: line 2, column 't': first increment time 1.0 is not after the initial "
+           "state's t = 1.0 (row i covers (t[i-1], t[i]])")
+    assert res[1].error == bad
+    # summary.csv: one row per file in the order given; the bad file's row has its error and no output
+    rows = summary.read_text().splitlines()
+    assert summary == tmp_path / "out" / "summary.csv" and rows[0].split(",") == list(SUMMARY_COLUMNS)
+    assert rows[1].split(",")[:5] == [str(d1 / "imu.csv"), str(out1), "", "0", "10"]
+    assert rows[1].split(",")[11:] == ["done", ""] and rows[2].startswith(f"{d2 / 'imu.csv'},,")
+    assert rows[2].endswith(bad if "," not in bad else f'"{bad}"')
+    _, sol = table(out1)
     assert sol.shape[0] == 10
     assert_at_rest(sol)
     shared = write_init(tmp_path, "shared.json", yaw=-45.0)
-    res = nav.run_nav_batch([d1 / "imu.csv"], shared, tmp_path / "out2", opts(earth_model="none"), jobs=1)
-    _, sol = table(res[0][1])
+    res, _ = nav.run_nav_batch([d1 / "imu.csv"], shared, tmp_path / "out2", opts(earth_model="none"), jobs=1)
+    _, sol = table(Path(res[0].output))
     assert_at_rest(sol, yaw0=-45.0)
 
 

@@ -69,7 +69,28 @@ def test_each_file_as_if_alone_and_a_bad_file_reported(farm: Path, jobs: str) ->
         got = files.read_table(out / f"r{i}" / "imu.nav.csv", files.SOLUTION_COLUMNS)
         want = _alone(farm, f"r{i}")
         assert got.view(np.int64).tolist() == want.view(np.int64).tolist()  # each from its own init.json
-    assert sorted(p.name for p in out.iterdir()) == ["r0", "r1", "r2"]
+    assert sorted(p.name for p in out.iterdir()) == ["r0", "r1", "r2", "summary.csv"]
+    summary = (out / "summary.csv").read_text().splitlines()
+    assert [ln.split(",", 1)[0] for ln in summary[1:]] == ["runs/r0/imu.csv", "runs/r1/imu.csv", "runs/bad/imu.csv",
+                                                           "runs/r2/imu.csv"]
+    assert "missing column(s)" in summary[3] and summary[3].split(",")[1] == ""  # the bad file: error, no output
+
+
+def test_each_on_a_dask_cluster_writes_what_local_processes_write(farm: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``--each --cluster ADDRESS`` on a real distributed.LocalCluster (two worker processes): the same solution
+    files, byte for byte, and the same summary as ``--jobs 2``, but for the output folder."""
+    distributed = pytest.importorskip("distributed")
+    from mavins.cli import main
+
+    monkeypatch.chdir(farm)
+    args = ["nav", "--each", "runs/r0/imu.csv", "runs/bad/imu.csv", "runs/r2/imu.csv"]
+    assert main([*args, "-o", "local_c", "--jobs", "2"]) == 2
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as lc:
+        assert main([*args, "-o", "remote_c", "--cluster", lc.scheduler_address]) == 2
+    for name in ("r0/imu.nav.csv", "r2/imu.nav.csv"):
+        assert (farm / "local_c" / name).read_bytes() == (farm / "remote_c" / name).read_bytes()
+    local = (farm / "local_c" / "summary.csv").read_text().replace("local_c", "OUT")
+    assert local == (farm / "remote_c" / "summary.csv").read_text().replace("remote_c", "OUT")
 
 
 def test_one_init_for_all_and_parquet_outputs(farm: Path) -> None:

@@ -149,3 +149,90 @@ def test_px4_gyro_bias_estimate_is_what_keeps_it_on_track(tmp_path: Path, px4_se
     _, err = px4_errors(out, truth)
     print(f"\nPX4 sample.ulg with --gyro-bias none: final {err[-1]:.2f} deg")
     assert err[-1] > PX4_NO_BIAS_MIN_DEG
+
+
+# --- a fleet: replay --each ------------------------------------------------------------------------------------
+FLEET = [REPO / "data" / "px4-sitl-events" / "sample_px4_events.ulg",  # GPS, baro, magnetometer: navigates
+         REPO / "data" / "px4-sample" / "sample.ulg",  # no GPS and no --lat/--lon/--alt: no initial position
+         REPO / "data" / "px4-gps-small" / "sample_log_small.ulg"]  # 6.5 s of IMU: too short to align
+
+
+def _summary(path: Path) -> list[dict[str, str]]:
+    import csv
+
+    with open(path, newline="", encoding="utf-8") as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_replay_each_reports_every_log_and_a_bad_one_stops_nothing(tmp_path: Path) -> None:
+    """``mavins replay --each`` over three real PX4 logs: the SITL flight is replayed into OUT/<folder>/<name>
+    .nav.csv (the same bytes as replaying it alone), the two that cannot give a solution are reported in
+    their rows with the reason and get no file, and OUT/summary.csv has one row per log in the order given;
+    exit 2 because some failed. The SITL row: its solution rows are the file's, its GNSS fixes accepted and
+    none rejected, its worst test ratio below 1 (every fix passed the gate), its final 1-sigma that of the
+    file's last row, its state NAVIGATING."""
+    from mavins.cli import main
+
+    out = tmp_path / "out"
+    assert main(["replay", "--each", *map(str, FLEET), "-o", str(out), "--jobs", "1"]) == 2
+    rows = _summary(out / "summary.csv")
+    assert [r["input"] for r in rows] == [str(p) for p in FLEET]
+    ok, no_fix, short = rows
+    nav_csv = out / "px4-sitl-events" / "sample_px4_events.nav.csv"
+    assert ok["output"] == str(nav_csv) and ok["error"] == "" and ok["state"] == "NAVIGATING"
+    header, *body = nav_csv.read_text().splitlines()
+    assert int(ok["solution_rows"]) == len(body)
+    last = dict(zip(header.split(","), body[-1].split(",")))
+    for axis in "ned":
+        assert float(ok[f"sigma_{axis}"]) == pytest.approx(float(last[f"sigma_{axis}"]), rel=1e-9)
+    assert int(ok["gnss_accepted"]) > 100 and int(ok["gnss_rejected"]) == 0
+    assert 0.0 < float(ok["worst_ratio"]) < 1.0
+    t = [float(line.split(",", 1)[0]) for line in body]
+    assert t[-1] - t[0] < float(ok["duration_s"])  # the IMU ran before the first solution (waiting, aligning)
+    assert int(ok["samples"]) > 100 * float(ok["duration_s"])  # PX4 SITL's IMU runs at 250 Hz
+    assert "no initial position" in no_fix["error"] and no_fix["output"] == "" and no_fix["state"] == ""
+    assert "did not finish" in short["error"] and short["output"] == ""
+    assert sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file()) == [
+        "px4-sitl-events/sample_px4_events.nav.csv", "summary.csv"]
+    alone = tmp_path / "alone.csv"
+    assert main(["replay", str(FLEET[0]), "-o", str(alone)]) == 0
+    assert alone.read_bytes() == nav_csv.read_bytes()
+
+
+def test_replay_each_on_a_dask_cluster_gives_the_same_fleet(tmp_path: Path) -> None:
+    """``--cluster ADDRESS`` on a real distributed.LocalCluster (two worker processes): the same solution
+    files and the same summary as on local processes, but for the output folder."""
+    distributed = pytest.importorskip("distributed")
+    from mavins.cli import main
+
+    local, remote = tmp_path / "local", tmp_path / "remote"
+    assert main(["replay", "--each", *map(str, FLEET[:2]), "-o", str(local), "--jobs", "2"]) == 2
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as lc:
+        assert main(["replay", "--each", *map(str, FLEET[:2]), "-o", str(remote), "--cluster",
+                     lc.scheduler_address]) == 2
+    name = Path("px4-sitl-events") / "sample_px4_events.nav.csv"
+    assert (local / name).read_bytes() == (remote / name).read_bytes()
+    a, b = _summary(local / "summary.csv"), _summary(remote / "summary.csv")
+    for r in a + b:
+        r["output"] = Path(r["output"]).name if r["output"] else ""
+    assert a == b
+
+
+def test_replay_of_several_logs_needs_each(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Several logs without --each, --jobs or --cluster without --each, --rerun with --each, and an -o that is a
+    file with --each are refused with one line, exit 2, nothing written."""
+    from mavins.cli import main
+
+    afile = tmp_path / "afile"
+    afile.write_text("keep")
+    for argv, say in ((["replay", *map(str, FLEET[:2]), "-o", str(tmp_path / "x.csv")], "replay them with --each"),
+                      (["replay", str(FLEET[0]), "-o", str(tmp_path / "x.csv"), "--jobs", "2"], "--jobs goes with"),
+                      (["replay", str(FLEET[0]), "-o", str(tmp_path / "x.csv"), "--cluster", "tcp://h:1"],
+                       "--cluster goes with"),
+                      (["replay", "--each", str(FLEET[0]), "-o", str(tmp_path / "d"), "--rerun", "r.rrd"],
+                       "--rerun records one log"),
+                      (["replay", "--each", str(FLEET[0]), "-o", str(afile)], "-o names a folder")):
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("mavins replay: error: ") and say in err[0], err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["afile"] and afile.read_text() == "keep"
