@@ -27,7 +27,7 @@ the filter's cost per IMU sample):
    without parsing the frames; the same figure as a share of one core at
    1 kHz input, against the service's CPU goal (10 % of a core at 1 kHz,
    docs/performance.md). Optionally the whole ``mavins run`` process at 1 kHz
-   (benchmarks/bench_service.cpu_run: a static IMU over UDP, filter on).
+   (benchmarks/bench_latency.cpu_run: a static IMU over UDP, filter on).
    Compile times are separate rows: a fresh interpreter with an empty numba
    cache, one with the cache, and pyins's first call (its numba functions
    are not cached).
@@ -877,11 +877,11 @@ def main(argv: Sequence[str] = ()) -> list[dict]:
         service = None
         if service_s > 0:
             log(f"whole `mavins run` process at 1 kHz ({service_s:g} s window)")
-            import bench_service
+            import bench_latency
 
-            service = bench_service.cpu_run(service_s, None)
+            service = bench_latency.cpu_run(service_s, None)
             log(f"bare Python UDP receiver at 1 kHz ({service_s:g} s window): the baseline of that row")
-            service["bare_pct"] = bench_service.cpu_bare(service_s)[0]
+            service["bare_pct"] = bench_latency.cpu_bare(service_s)[0]
         lines, r = cost_notes(b100, b1k, live, service)
         NOTES.extend([""] + lines)
         rows.extend(r)

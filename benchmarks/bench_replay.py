@@ -11,7 +11,7 @@
   so both pay their interpreter start-up; ratio = replay messages/s divided by
   baseline messages/s.
 * **Memory.** A 1-hour tlog at 1 kHz (3.6 million HIGHRES_IMU frames of a
-  static IMU, encoded with numpy, see bench_service.highres_frames) through
+  static IMU, encoded with numpy, see service_harness.highres_frames) through
   ``mavins replay``; the parent samples the child's RSS (``/proc/PID/status``)
   every 0.2 s and its peak RSS (``VmHWM``, since exec) until it exits. "Flat" means RSS grew by
   less than max(5 MB, 2 %) from a quarter of the run to its end.
@@ -49,7 +49,7 @@ for _p in (str(HERE), str(ROOT)):
 
 os.environ.setdefault("MAVLINK20", "1")
 
-from bench_service import (  # noqa: E402
+from service_harness import (  # noqa: E402
     highres_frames,
     inclusive,
     line_text,
@@ -109,7 +109,7 @@ def build_sim_tlog(path: Path, seconds: float, rate: float) -> dict:
 
 
 def build_static_tlog(path: Path, seconds: float, rate: float) -> dict:
-    """HIGHRES_IMU only, static IMU (bench_service's record), ``seconds`` at ``rate`` Hz."""
+    """HIGHRES_IMU only, static IMU (service_harness's record), ``seconds`` at ``rate`` Hz."""
     gyro, accel = static_imu()
     n = int(round(seconds * rate))
     chunk = 256 * 2000  # a multiple of 256 keeps the sequence numbers continuous
@@ -256,7 +256,7 @@ def proc_mem(pid: int) -> dict[str, float]:
 
 
 def last_row(path: Path) -> np.ndarray | None:
-    from bench_service import read_last_row
+    from service_harness import read_last_row
 
     return read_last_row(path)
 
@@ -388,7 +388,7 @@ def main(argv: Sequence[str] = ()) -> list[dict]:
         if "memory" not in args.skip:
             mem_tlog = work / f"static_{MEM_RATE:.0f}hz_{args.mem_seconds:.0f}s.tlog"
             minfo = ensure(mem_tlog, build_static_tlog, args.mem_seconds, MEM_RATE)
-            from bench_service import ALT, HEADING, LAT, LON
+            from service_harness import ALT, HEADING, LAT, LON
 
             log("mavins replay of the 1 kHz tlog, sampling RSS")
             rep = run_replay(mem_tlog, work / "replay_mem.csv",

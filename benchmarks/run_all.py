@@ -178,7 +178,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--only", action="append", default=[], metavar="NAME", help="run only this module (repeatable)")
     p.add_argument("--quick", action="store_true", help="short runs (development; not for docs/performance.md)")
     p.add_argument("--args", action="append", default=[], metavar="NAME=ARGS",
-                   help="extra arguments for one module, e.g. bench_service=\"--profile\" (repeatable)")
+                   help="extra arguments for one module, e.g. bench_latency=\"--profile\" (repeatable)")
     args = p.parse_args(sys.argv[1:] if argv is None else list(argv))
     extra: dict[str, list[str]] = {}
     for item in args.args:

@@ -20,7 +20,7 @@ guarantees that follow.
   then flooded at the sender's full speed: it stays up, every datagram is
   processed or counted (exactly, against the kernel's own counts), the output
   stays on sensor time and is back at ``--rate`` afterwards. Memory and the
-  output rate during a flood are benchmark figures (bench_service.py).
+  output rate during a flood are benchmark figures (bench_flood.py).
 * ``test_sigterm_leaves_readable_recording_and_tlog``: SIGTERM mid-stream: exit
   code 0, the Rerun file reads back, the tlog replays to the same solution.
 

@@ -18,7 +18,7 @@ clock. Signed streams are encoded once the service is ready, so a slow start
 Nothing here asserts how long something took: each wait is for an event (a
 datagram, the service having read its input) with a generous timeout, and
 order is told by the kernel's receive stamps. Timings (peer expiry, memory of
-the peer table) are measured in benchmarks/bench_service.py.
+the peer table) are measured in benchmarks/bench_peers.py.
 """
 
 from __future__ import annotations
@@ -328,7 +328,7 @@ def test_silent_peer_stops_receiving_after_the_timeout(tmp_path: Path) -> None:
     """A peer that stops talking stops receiving (``--peer-timeout``), a peer that keeps talking keeps
     receiving, and a peer that talks again receives again. Told by the kernel's receive stamps: the
     service sends each datagram to its peers one after the other, so once the silent peer is dropped the
-    talker receives datagrams stamped after the silent peer's last one (how soon: bench_service.py)."""
+    talker receives datagrams stamped after the silent peer's last one (how soon: bench_peers.py)."""
     plain = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
     hb = plain.heartbeat_encode(6, 8, 0, 0, 4).pack(plain)
     silent, talker = udp_socket(), udp_socket()
@@ -366,7 +366,7 @@ def test_silent_peer_stops_receiving_after_the_timeout(tmp_path: Path) -> None:
 def test_peer_table_is_bounded_under_many_source_ports(tmp_path: Path) -> None:
     """3000 source ports with ``--max-peers 4``: only the 4 newest receive. The newest port's first datagram
     was sent after the service had taken every frame, so from that stamp on nothing may reach the 4 ports
-    before them (the memory the table takes is measured in bench_service.py)."""
+    before them (the memory the table takes is measured in bench_peers.py)."""
     plain = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
     hb = plain.heartbeat_encode(6, 8, 0, 0, 4).pack(plain)
     n_ports, kept = 3000, 8

@@ -15,7 +15,7 @@
   service has read everything, then a HEARTBEAT sent after that has arrived),
   and every count is exact or bounded by a loss the kernel counted (its drop
   counters of each socket). HEARTBEAT's 1 Hz of wall time and the ingest rate
-  are measured in benchmarks/bench_service.py.
+  are measured in benchmarks/bench_ingest.py and bench_latency.py.
 * The truth is the simulator's SIM_STATE, sent straight after the HIGHRES_IMU of
   the same instant at 50 Hz; SIM_STATE has no time field, so it is paired with
   the ``time_usec`` of the HIGHRES_IMU before it. Positions use SIM_STATE's
@@ -456,7 +456,7 @@ def test_identity_heartbeat_and_stamps(flight_run: Run) -> None:
     assert {(m.get_srcSystem(), m.get_srcComponent()) for m in ours} == {(SIM_SYSID, 191)}
     assert flight_run.truth.sysids == {SIM_SYSID}
     # HEARTBEAT: an onboard controller, no autopilot, ACTIVE once navigating (the run ended on such a
-    # HEARTBEAT, sent after the last input; its 1 Hz of wall time is measured in bench_service.py)
+    # HEARTBEAT, sent after the last input; its 1 Hz of wall time is measured in bench_flood.py)
     hb = pub["HEARTBEAT"]
     assert hb
     for m in hb:

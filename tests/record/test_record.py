@@ -7,7 +7,7 @@
   CSV) for the same sensor time, the stored blueprint, /errors only with truth.
 * A long synthetic feed shows that the live recorder's buffers flush (what it
   holds stays bounded, read from the recorder itself; the process memory is
-  measured in benchmarks/bench_service.py) and ``--rerun-serve`` never waits
+  measured in benchmarks/bench_recorder.py) and ``--rerun-serve`` never waits
   for a viewer.
 * With Xvfb and Mesa's software Vulkan driver installed
   (scripts/install_viewer_deps.sh), the demo recording is rendered to PNG by
@@ -325,7 +325,7 @@ def test_recorder_memory_stays_bounded(tmp_path: Path) -> None:
     rows of any entity nor more than 2000 trajectory points, every row logged is
     either held or sent, and what it sent reaches the file while the run goes
     on (the file grows between checkpoints). The resident memory of a process
-    doing this is a benchmark figure (bench_service.py), not a test.
+    doing this is a benchmark figure (bench_recorder.py), not a test.
     """
     import math
 
@@ -375,7 +375,7 @@ def test_serve_does_not_wait_for_a_viewer(tmp_path: Path) -> None:
     """Recorder with the gRPC server and no viewer: logging and close() return and the file is complete.
 
     They run in a thread that is given minutes, so only waiting for a viewer that never comes fails
-    here; how long they take is measured in bench_service.py.
+    here; how long they take is measured in bench_recorder.py.
     """
     from mavins.record.recorder import Recorder
 
