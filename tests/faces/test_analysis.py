@@ -709,3 +709,21 @@ def test_run_analyze_writes_the_budget_values_and_refuses_to_overwrite_the_scena
     with pytest.raises(DataFileError, match=r"is also the input SCENARIO"):
         an.run_analyze(inside, spec, victim.parent, an.AnalysisOptions(runs=2, jobs=1))
     assert sorted(p.name for p in victim.parent.iterdir()) == ["budget.csv"]
+
+
+def test_on_the_earth_the_vertical_channel_diverges_as_the_gravity_gradient_says() -> None:
+    """The same 3 s at rest with a vertical accelerometer bias alone, on the Earth and in the laboratory: the
+    laboratory's vertical position sigma is sigma_b t^2/2 exactly, the Earth's grows by the gravity
+    gradient k = 2 g/R (x'' = b + k x: x = (b/k)(cosh(sqrt(k) t) - 1)), a factor 1 + k t^2/12 to first order
+    (2.3e-6 at 3 s); the horizontal channels are unaffected at this order."""
+    sb = 1e-3
+    spec = cov.AnalysisSpec(em.ImuSpec(accel_bias=sb))
+    opts = an.AnalysisOptions(runs=2, jobs=1, samples=1)
+    _, earth_src, t = an.covariance_part(SHORT_SC, spec, opts)
+    _, lab_src, _ = an.covariance_part(LAB_SC, spec, opts)
+    pd_earth = np.sqrt(earth_src["accel_bias"][-1, 8, 8])
+    pd_lab = np.sqrt(lab_src["accel_bias"][-1, 8, 8])
+    assert pd_lab == pytest.approx(sb * t[-1] ** 2 / 2.0, rel=1e-12)
+    k = 2.0 * G_EQ / R_N_EQ  # 47 deg N instead of the equator: the gradient differs by 0.5 %
+    growth = k * t[-1] ** 2 / 12.0
+    assert pd_earth / pd_lab - 1.0 == pytest.approx(growth, rel=0.1)
