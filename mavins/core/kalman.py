@@ -171,7 +171,7 @@ def predict(P: np.ndarray, phi: np.ndarray, qd: np.ndarray) -> None:
 
 
 @kernel
-def _cholesky_inverse(S: np.ndarray) -> tuple[np.ndarray, bool]:
+def spd_inverse(S: np.ndarray) -> tuple[np.ndarray, bool]:
     """Inverse of a small symmetric positive definite matrix (Cholesky); ok=False if not SPD."""
     m = S.shape[0]
     L = np.zeros((m, m))
@@ -233,7 +233,7 @@ def update(
     for i in range(m):
         for j in range(n):
             y[i] -= H[i, j] * x[j]
-    sinv, ok = _cholesky_inverse(S)
+    sinv, ok = spd_inverse(S)
     if not ok:
         return np.inf, np.inf, False
     nis = 0.0

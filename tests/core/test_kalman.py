@@ -416,13 +416,13 @@ def test_predict_by_hand() -> None:
     assert np.array_equal(P, P.T)  # symmetrised to the bit
 
 
-def test_cholesky_inverse_exact() -> None:
+def testspd_inverse_exact() -> None:
     """S = L L^T with L = [[2, 0, 0], [1, 2, 0], [1, 1, 2]]: S = [[4, 2, 2], [2, 5, 3], [2, 3, 6]], det 64,
     S^-1 = adj(S) / 64 = [[21, -6, -4], [-6, 20, -8], [-4, -8, 16]] / 64 (every step binary-exact)."""
-    inv, ok = kf._cholesky_inverse(np.array([[4.0, 2.0, 2.0], [2.0, 5.0, 3.0], [2.0, 3.0, 6.0]]))
+    inv, ok = kf.spd_inverse(np.array([[4.0, 2.0, 2.0], [2.0, 5.0, 3.0], [2.0, 3.0, 6.0]]))
     assert ok
     np.testing.assert_array_equal(inv, np.array([[21.0, -6.0, -4.0], [-6.0, 20.0, -8.0], [-4.0, -8.0, 16.0]]) / 64)
-    inv, ok = kf._cholesky_inverse(np.array([[4.0]]))
+    inv, ok = kf.spd_inverse(np.array([[4.0]]))
     assert ok and inv[0, 0] == 0.25
 
 
@@ -430,7 +430,7 @@ def test_cholesky_inverse_exact() -> None:
                                [[4.0, 2.0, 2.0], [2.0, 5.0, 3.0], [2.0, 3.0, 2.0]], [[math.nan]]])
 def test_cholesky_refuses_what_is_not_positive_definite(S) -> None:
     """A zero or negative pivot (singular or indefinite S), or NaN: not SPD."""
-    inv, ok = kf._cholesky_inverse(np.array(S))
+    inv, ok = kf.spd_inverse(np.array(S))
     assert not ok and np.all(inv == 0.0) and inv.shape == np.array(S).shape
 
 
