@@ -29,7 +29,7 @@ def _add_demo(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-rerun", action="store_true", help="do not record")
     p.add_argument("--seed", type=_positive_int(0), default=0, metavar="N", help="random seed of the sensor errors")
     p.add_argument("--aiding", type=_Aiding(), default="gnss,baro", metavar="KINDS",
-                   help="what the service aids with from the simulator's stream (gnss,baro,mag,zupt), or none")
+                   help="what the service aids with from the simulator's stream (gnss,baro,mag,zupt,nhc), or none")
     p.add_argument("--gnss-outage", type=_Outage(), default="60,90", metavar="START,END",
                    help="no GNSS between these sensor times (s)")
     p.add_argument("--no-outage", action="store_true", help="GNSS throughout")

@@ -68,7 +68,7 @@ SYSID = (1, 255)
 HEADING_WORDS = ("auto", "gyrocompass", "mag", "vehicle")  # engine.HEADING_WORDS (not imported: --help stays light)
 
 
-AIDING_WORDS = ("gnss", "baro", "mag", "zupt")  # aiding.AIDING_KINDS, likewise
+AIDING_WORDS = ("gnss", "baro", "mag", "zupt", "nhc")  # aiding.AIDING_KINDS, likewise
 
 
 class _Heading:
@@ -159,7 +159,7 @@ def _filter_options(g: argparse._ArgumentGroup, with_aiding: bool = True) -> Non
     """The error-state filter's options (docs/conventions.md "Aided navigation")."""
     if with_aiding:
         g.add_argument("--aiding", type=_Aiding(), default="gnss,baro,mag", metavar="KINDS",
-                       help="comma list of gnss,baro,mag,zupt to use from the stream, or none (free inertial)")
+                       help="comma list of gnss,baro,mag,zupt,nhc to use from the stream (nhc: the non-holonomic constraint of a wheeled vehicle), or none (free inertial)")
     g.add_argument("--grade", choices=GRADES, default="consumer",
                    help="the filter's IMU error model: the simulator's grade figures")
     g.add_argument("--imu-spec", type=Path, metavar="SPEC.toml",

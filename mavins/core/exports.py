@@ -46,6 +46,7 @@ EXPORTS = (
     Export("aided", "keep_or_undo", f"none(b1, {M}, {V}, {M}, {V})"),
     Export("aided", "apply_mag", f"Tuple((i8, f8, f8))({V}, {V}, {V}, {M}, {V}, {V}, {V}, f8, f8, f8, f8, f8, f8, f8, {V})"),
     Export("kalman", "zupt", f"{MEASUREMENT}({V}, f8)"),
+    Export("kalman", "nhc", f"{MEASUREMENT}({V}, f8)"),
     Export("kalman", "heading", f"{MEASUREMENT}({V}, f8, f8)"),
     Export("kalman", "yaw_reset", f"none({V}, {V}, {V}, {M}, f8, f8, f8, f8, f8, f8, f8, f8)"),
     Export("yawgsf", "predict", f"none({M}, {C}, {V}, {V}, f8, f8, f8, f8)"),

@@ -632,6 +632,33 @@ def mag_heading(
 
 
 @kernel
+def nhc(s: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Non-holonomic constraint of a wheeled vehicle: no sideways and no vertical velocity in the body frame
+    (sigma m/s each). With ``v_b = C^T v`` and ``C(true) = (I - [phi x]) C(est)``, the estimate's error is
+    ``dv_b = C^T dv + C^T [v x] phi`` (first order), so the rows y and z of ``C^T`` (on dv) and of
+    ``C^T [v x]`` (on phi) are H; the innovation (predicted minus measured) is ``v_b`` y and z itself
+    (Groves 2nd ed., section 16.4.1, context-based constraints; Shin's motion constraints of a land vehicle)."""
+    c = s[sd.S_C:sd.S_C + 9]
+    v0, v1, v2 = s[sd.S_V], s[sd.S_V + 1], s[sd.S_V + 2]
+    nu = np.empty(2)
+    H = np.zeros((2, NX))
+    R = np.zeros((2, 2))
+    for r in range(2):
+        a = r + 1  # body y, then z
+        c0, c1, c2 = c[a], c[3 + a], c[6 + a]  # column a of C: row a of C^T
+        nu[r] = c0 * v0 + c1 * v1 + c2 * v2
+        H[r, X_DV] = c0
+        H[r, X_DV + 1] = c1
+        H[r, X_DV + 2] = c2
+        # (C^T [v x]) row a = c_a^T [v x] = (c_a x v)^T, c_a the a-th column of C
+        H[r, X_PHI] = c1 * v2 - c2 * v1
+        H[r, X_PHI + 1] = c2 * v0 - c0 * v2
+        H[r, X_PHI + 2] = c0 * v1 - c1 * v0
+        R[r, r] = sigma * sigma
+    return nu, H, R
+
+
+@kernel
 def zupt(s: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Zero-velocity update: the vehicle is at rest, v = 0 (sigma m/s per axis)."""
     nu = np.empty(3)

@@ -79,6 +79,7 @@ class EngineConfig:
     zupt_accel: float = 0.15  # m/s^2: ||f| - g| below this likewise
     zupt_still_s: float = 0.5  # s of still samples before zero-velocity updates start
     zupt_every_s: float = 0.1  # s between zero-velocity updates while still
+    nhc_every_s: float = 0.1  # s between non-holonomic constraints (--aiding ...,nhc), while navigating
     aiding_every_s: float = 0.02  # s between magnetometer updates (a sample up to a quarter of it early is taken)
 
 
@@ -108,6 +109,7 @@ class Engine:
     filter: LiveFilter = field(init=False)
     _still_since: float | None = field(init=False, default=None)
     _next_zupt: float = field(init=False, default=-math.inf)
+    _next_nhc: float = field(init=False, default=-math.inf)
     _next_mag: float = field(init=False, default=-math.inf)
     _row: np.ndarray = field(init=False, default_factory=lambda: np.zeros(sd.OUT_SIZE))
     _unix_date: float | None = field(init=False, default=None)  # s: UNIX time the stream reported (SYSTEM_TIME)
@@ -301,7 +303,7 @@ class Engine:
             self._event("INFO", "heading unknown (no magnetometer, no vehicle heading, gyros too coarse to "
                                 "gyrocompass): estimated from GNSS velocity once the vehicle moves")
         self._still_since = None
-        self._next_zupt = self._next_mag = -math.inf
+        self._next_zupt = self._next_mag = self._next_nhc = -math.inf
         if self.gyro_bias.any():
             self._event("INFO", "gyro bias estimated at rest: "
                         + " ".join(f"{math.degrees(b) * 3600:.1f}" for b in self.gyro_bias) + " deg/h")
@@ -341,6 +343,7 @@ class Engine:
             return None
         self._gyro_last = flt.body_rate(smp.gyro)  # the update's last sample, bias removed (published, ZUPT)
         self._zupt_from_sample(smp)
+        self._nhc_now(smp.t)
         t = sd.state_time(s)  # type: ignore[arg-type]
         if not self.degraded and sd.frame_limit(s) is not None:  # type: ignore[arg-type]
             self.degraded = True
@@ -414,6 +417,13 @@ class Engine:
         if t - self._still_since >= self.cfg.zupt_still_s and t >= self._next_zupt:
             self._next_zupt = t + self.cfg.zupt_every_s
             self.filter.measure(self._s, self._kcfg, t, "zupt")  # type: ignore[arg-type]
+
+    def _nhc_now(self, t: float) -> None:
+        """The non-holonomic constraint of a wheeled vehicle (``--aiding ...,nhc``): every nhc_every_s of
+        sensor time at an attitude update (correlated in time, so not at every update: docs/filter.md)."""
+        if "nhc" in self.cfg.filter.aiding and t >= self._next_nhc:
+            self._next_nhc = t + self.cfg.nhc_every_s
+            self.filter.measure(self._s, self._kcfg, t, "nhc")  # type: ignore[arg-type]
 
     # -- measurements from other messages ----------------------------------------
     def on_gnss(self, t: float | None, lat: float, lon: float, h: float, vel: tuple[float, float, float] | None,

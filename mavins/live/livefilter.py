@@ -24,7 +24,7 @@ from ..core.frames import north_east_error
 from ..core.jit import for_frame
 from ..core.records import Uncertainty
 
-AIDING_KINDS = ("gnss", "baro", "mag", "zupt")
+AIDING_KINDS = ("gnss", "baro", "mag", "zupt", "nhc")
 ABS_TIMEOUT_S = 5.0  # s of sensor time after the last accepted fix during which position counts as absolute
 GNSS_LOST_S = 3.0  # s without an accepted fix after which GNSS is reported lost
 JUMP_M = 1.0  # m: an accepted position correction above this is a discontinuity (reset_counter)
@@ -58,6 +58,7 @@ class FilterSettings:
     misalignment: bool = False  # estimate the gyro and accelerometer misalignments (errmodel.spec_of)
     sigma_mag_bias: float = 0.0  # gauss per axis: initial 1-sigma of the hard iron (0: taken as calibrated, not estimated)
     sigma_zupt: float = aided.DEFAULT_SIGMA_ZUPT  # m/s (the batch filter's default)
+    sigma_nhc: float = 0.1  # m/s: the non-holonomic constraint's sideways and vertical body velocity (ground vehicles)
     predict_dt: float = 0.01  # s: the covariance is propagated at about this interval
     delays: dict[str, float] = field(default_factory=dict)  # s by kind (gnss, baro, mag): measured this long before its stamp
 
@@ -281,6 +282,8 @@ class LiveFilter:
                 self._update(s, cfg, "gnss_yaw", ("mag",), kalman.heading(s, yaw, sigma))
         elif kind == "zupt":
             self._update(s, cfg, "zupt", ("vel",), kalman.zupt(s, self.settings.sigma_zupt))
+        elif kind == "nhc":  # a wheeled vehicle: no sideways and no vertical body velocity
+            self._update(s, cfg, "nhc", ("vel",), kalman.nhc(s, self.settings.sigma_nhc))
 
     def _update(self, s: np.ndarray, cfg: np.ndarray, kind: str, ratio_keys: tuple[str, ...],
                 model: tuple[np.ndarray, np.ndarray, np.ndarray]) -> bool:
@@ -336,7 +339,7 @@ def warm_measurements() -> None:
     s = rest_state()
     f = LiveFilter(FilterSettings(aiding=AIDING_KINDS))
     f.start(s, cfg, np.zeros(3), 0.01)
-    for kind, args in (("zupt", ()), ("gnss", (math.radians(45.0), math.radians(7.0), 100.0, (0.0, 0.0, 0.0), 1.0, 2.0, 0.3)),
+    for kind, args in (("zupt", ()), ("nhc", ()), ("gnss", (math.radians(45.0), math.radians(7.0), 100.0, (0.0, 0.0, 0.0), 1.0, 2.0, 0.3)),
                        ("gnss", (math.radians(45.0), math.radians(7.0), 100.0, (0.0, 0.0, math.nan), 1.0, 2.0, 0.3)),
                        ("baro", (100.0, 0.5)), ("mag", ((0.2, 0.0, 0.4),)), ("gnss_yaw", (0.1, 0.02))):
         f.measure(s, cfg, 0.0, kind, *args)

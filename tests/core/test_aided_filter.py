@@ -662,7 +662,7 @@ def measurement_jacobian_check(measure, dx: np.ndarray, tol: float) -> None:
     np.testing.assert_allclose(d, H[:, :9] @ dx[:9], atol=tol)
 
 
-@pytest.mark.parametrize("which", ["pos", "vel", "baro", "yaw", "mag", "zupt"])
+@pytest.mark.parametrize("which", ["pos", "vel", "baro", "yaw", "mag", "zupt", "nhc"])
 def test_measurement_models_linearise_the_measurement(which: str) -> None:
     """Each measurement's H against the change of its innovation under an injected error (phi 1 mrad, dv, dp).
 
@@ -705,6 +705,10 @@ def test_measurement_models_linearise_the_measurement(which: str) -> None:
             return kf.mag_heading(s, kf.mag_level(s, CFG, np.zeros(kf.B_SIZE), m_b, np.zeros(3), 0.0), 0.05,
                                   math.tan(1.1), 48.0 * math.cos(1.1), 0.01)
         tol = 2e-5
+    elif which == "nhc":
+        def measure(s):
+            return kf.nhc(s, 0.1)
+        tol = 7e-4  # second order: |phi| |dv| = 2.7e-3 x 0.23 m/s and |phi|^2 |v| / 2 = 3e-5 m/s
     else:
         def measure(s):
             return kf.zupt(s, 0.01)
