@@ -116,6 +116,7 @@ class Engine:
     _antenna_yaw: float | None = field(init=False, default=None)  # rad: the vehicle's heading from the latest GNSS yaw
     declination: float = field(init=False, default=0.0)  # deg: the one used by the alignment and the filter
     _gsf: tuple[np.ndarray, np.ndarray, np.ndarray] | None = field(init=False, default=None)  # yaw bank (X, P, logw)
+    _last_fix: tuple[float, float, float, float, float, float] | None = field(init=False, default=None)  # while pending
     _gsf_inc: list[float] = field(init=False, default_factory=lambda: [0.0] * 7)  # dv_b, dtheta_b, dt since the update
     _gsf_t: float = field(init=False, default=0.0)  # s: time of the last sample integrated into _gsf_inc
 
@@ -179,9 +180,19 @@ class Engine:
         a heading source for the alignment; while navigating, a heading measurement (with GNSS aiding)."""
         vehicle = math.remainder(yaw - math.radians(self.cfg.gnss_yaw_offset), 2.0 * math.pi)
         self._antenna_yaw = vehicle
-        if self.state is State.NAVIGATING and self._s is not None and self._gsf is None:
-            t_m = sd.state_time(self._s) if t is None else t
-            self.filter.measure(self._s, self._kcfg, t_m, "gnss_yaw", vehicle, sigma)
+        if self.state is not State.NAVIGATING or self._s is None:
+            return
+        if self._gsf is not None:  # the heading was pending: the receiver's ends the wait, on the last fix
+            fix = self._last_fix
+            if fix is None:
+                self.counters["gnss_yaw_held"] += 1  # no fix yet to put the solution on: the next heading
+                return
+            self._heading_reset(vehicle, sigma * sigma, *fix, GNSS_HEADING,
+                                f"heading from the GNSS receiver: {math.degrees(vehicle):.2f} deg (1-sigma "
+                                f"{math.degrees(sigma):.2f} deg)")
+            return
+        t_m = sd.state_time(self._s) if t is None else t
+        self.filter.measure(self._s, self._kcfg, t_m, "gnss_yaw", vehicle, sigma)
 
     def set_vehicle_yaw(self, yaw_rad: float) -> None:
         """The vehicle's own heading (from its ATTITUDE), a heading source for alignment."""
@@ -295,6 +306,7 @@ class Engine:
         self.filter.start(self._s, self._kcfg, self.gyro_bias, self._dt_nominal or 0.01, self._pos_sigma, source,
                           math.radians(lat), smp.t - self._t_align0 if self.gyro_bias.any() else 0.0)
         self._gsf = yawgsf.make(0.0, 0.0) if source == GNSS_YAW_PENDING else None
+        self._last_fix = None
         # an unknown heading is not learnt by the filter's linear updates (a consider state) until the reset
         self.filter.free = kalman.ALL_BUT_HEADING if self._gsf is not None else kalman.ALL
         self._gsf_inc = [0.0] * 7
@@ -448,27 +460,35 @@ class Engine:
         unknown heading, the inertial velocity points anywhere)."""
         if vel is None or not (math.isfinite(vel[0]) and math.isfinite(vel[1])):
             return True
+        self._last_fix = (lat, lon, float(vel[0]), float(vel[1]), sigma_h, sigma_vel)
         X, P, logw = self._gsf  # type: ignore[misc]
         yawgsf.update(X, P, logw, float(vel[0]), float(vel[1]), float(sigma_vel))
         psi, var = yawgsf.estimate(X, P, logw)
         if var < math.radians(GSF_RESET_SIGMA_DEG) ** 2:
-            s = self._s
-            c = s[sd.S_C:sd.S_C + 9]  # type: ignore[index]
-            dpsi = math.remainder(psi - math.atan2(c[3], c[0]), 2.0 * math.pi)
-            kalman.yaw_reset(s, self._kcfg, self.filter.bias, self.filter.P, dpsi, var, math.radians(lat),
-                             math.radians(lon), sigma_h * sigma_h, float(vel[0]), float(vel[1]), sigma_vel * sigma_vel)
-            self._gsf = None
-            self.filter.free = kalman.ALL
-            self.heading_used = GNSS_YAW
-            self.counters["yaw_resets"] += 1
-            self._event("INFO", f"heading from GNSS velocity: {math.degrees(psi):.2f} deg (1-sigma "
-                                f"{math.degrees(math.sqrt(var)):.2f} deg), the solution turned by "
-                                f"{math.degrees(dpsi):.2f} deg and put on the fix")
+            self._heading_reset(psi, var, *self._last_fix, GNSS_YAW,
+                                f"heading from GNSS velocity: {math.degrees(psi):.2f} deg (1-sigma "
+                                f"{math.degrees(math.sqrt(var)):.2f} deg)")
             return True
         if math.hypot(vel[0], vel[1]) < GSF_MOVING_MS:
             return True
         self.counters["gnss_held_for_yaw"] += 1
         return False
+
+    def _heading_reset(self, psi: float, var: float, lat: float, lon: float, vn: float, ve: float, sigma_h: float,
+                       sigma_vel: float, source: str, text: str) -> None:
+        """End a pending heading: the solution turned to ``psi`` (rad, variance ``var``) and put on the fix
+        (deg, deg, NED m/s, 1-sigma m and m/s) by kalman.yaw_reset; normal fusion resumes, ``source`` is the
+        heading used, and the event says ``text`` and by how much the solution turned."""
+        s = self._s
+        c = s[sd.S_C:sd.S_C + 9]  # type: ignore[index]
+        dpsi = math.remainder(psi - math.atan2(c[3], c[0]), 2.0 * math.pi)
+        kalman.yaw_reset(s, self._kcfg, self.filter.bias, self.filter.P, dpsi, var, math.radians(lat),
+                         math.radians(lon), sigma_h * sigma_h, vn, ve, sigma_vel * sigma_vel)
+        self._gsf = None
+        self.filter.free = kalman.ALL
+        self.heading_used = source
+        self.counters["yaw_resets"] += 1
+        self._event("INFO", f"{text}, the solution turned by {math.degrees(dpsi):.2f} deg and put on the fix")
 
     def on_baro(self, t: float | None, h: float, sigma: float) -> None:
         """A barometric height (m, with an unknown offset the filter estimates)."""

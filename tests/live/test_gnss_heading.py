@@ -35,9 +35,10 @@ def chi2_quantile(z: float, k: float) -> float:
     return k * (1.0 - c + z * math.sqrt(c)) ** 3
 
 
-def fly(seed: int):  # type: ignore[no-untyped-def]
-    """The engine fed the run's IMU samples, its 5 Hz fixes (ground velocity) and each fix's dual-antenna
-    heading; returns the engine, the output rows (t, yaw, published yaw 1-sigma) and the truth (t, yaw deg)."""
+def fly(seed: int, heading_from: float = 0.0):  # type: ignore[no-untyped-def]
+    """The engine fed the run's IMU samples, its 5 Hz fixes (ground velocity) and, from ``heading_from`` s on,
+    each fix's dual-antenna heading; returns the engine, the output rows (t, yaw, published yaw 1-sigma) and
+    the truth (t, yaw deg)."""
     run = generate(load("flight"), duration=DURATION, rate=100.0, grade="consumer", seed=seed)
     g = simulate_aiding(run, GnssConfig(rate=5.0), None, None).gnss
     truth = run.exact.truth
@@ -52,7 +53,8 @@ def fly(seed: int):  # type: ignore[no-untyped-def]
         while j < len(g) and g[j, 0] <= t:
             r = g[j].tolist()
             eng.on_gnss(r[0], r[1], r[2], r[3], (r[4], r[5], math.nan), r[7], r[8], r[9])
-            eng.on_gnss_yaw(r[0], math.remainder(true_yaw[j] + noise[j], 2.0 * math.pi), math.radians(SIGMA_DEG))
+            if r[0] >= heading_from:
+                eng.on_gnss_yaw(r[0], math.remainder(true_yaw[j] + noise[j], 2.0 * math.pi), math.radians(SIGMA_DEG))
             j += 1
         sol = eng.on_imu(ImuSample(t, tuple(w[i].tolist()), tuple(f[i].tolist()), None, 1, 1))
         if sol is not None:
@@ -100,3 +102,20 @@ def test_the_published_yaw_sigma_is_consistent_over_the_runs(runs) -> None:  # t
     anees = float(np.mean(np.mean(z2, axis=0)))
     lo, hi = chi2_quantile(-Z975, N_RUNS) / N_RUNS, chi2_quantile(Z975, N_RUNS) / N_RUNS
     assert lo < anees < hi, (anees, lo, hi)
+
+
+def test_a_heading_that_arrives_after_the_alignment_ends_the_wait() -> None:
+    """No heading source at the alignment (the receiver's heading only from 15 s on, before the vehicle moves
+    at 36.8 s): the engine aligns with the heading pending, and the first dual-antenna heading ends the wait
+    at once (put on the last fix, as the GNSS-velocity reset does), not the yaw estimator 20 s later: one
+    reset, the receiver's heading used, every later yaw within 3 published sigma and the sigma at most the
+    receiver's plus what a few seconds of gyro drift add."""
+    eng, out, truth = fly(1000, heading_from=15.0)
+    assert eng.heading_used == GNSS_HEADING and eng.counters["yaw_resets"] == 1
+    assert any(text.startswith("heading from the GNSS receiver") for _, text in eng.events)
+    after = out[:, 0] >= 15.3
+    pending = out[:, 0] < 15.0
+    assert np.all(out[pending, 2] > math.radians(90.0))  # a heading uniform on the circle until then
+    z = yaw_z(out[after], truth)
+    assert np.all(np.abs(z) < 3.0), np.abs(z).max()
+    assert np.all(out[after, 2] < math.radians(1.0))
