@@ -392,3 +392,29 @@ def mag_by_hand(tans: list[float], p0: float, r: float, nu: float) -> tuple[floa
     h = -(sum(tans[:-1]) / (len(tans) - 1) if len(tans) > 1 else tans[-1])
     S = h * h * p + r
     return nu * nu / S, p * h * nu / S
+
+
+# --- the live engine fed a simulated run in this process ------------------------------------------------------
+def feed_engine(engine, run, gnss: np.ndarray, each_fix=None, row=None) -> list:  # type: ignore[no-untyped-def]
+    """Feed ``engine`` (mavins.live.engine.Engine) the run's IMU samples (sim.generate.SimRun, its rates) and the
+    GNSS rows ``gnss`` (sim.aiding.simulate_aiding's columns: horizontal velocity only, as GPS_RAW_INT gives)
+    at their times, each fix before the first sample after it; ``each_fix(engine, j, fix_row)`` runs after
+    each fix (e.g. its dual-antenna heading). Returns ``row(solution)`` for every output set (default: the
+    solution row)."""
+    import math as _math
+
+    from mavins.core.records import ImuSample
+
+    w, f = run.rates()
+    out, j = [], 0
+    for i, t in enumerate(run.t.tolist()):
+        while j < len(gnss) and gnss[j, 0] <= t:
+            r = gnss[j].tolist()
+            engine.on_gnss(r[0], r[1], r[2], r[3], (r[4], r[5], _math.nan), r[7], r[8], r[9])
+            if each_fix is not None:
+                each_fix(engine, j, r)
+            j += 1
+        sol = engine.on_imu(ImuSample(t, tuple(w[i].tolist()), tuple(f[i].tolist()), None, 1, 1))
+        if sol is not None:
+            out.append(sol.row if row is None else row(sol))
+    return out

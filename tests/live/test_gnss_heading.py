@@ -16,12 +16,12 @@ import math
 import numpy as np
 import pytest
 
-from mavins.core.records import ImuSample
 from mavins.live.engine import Engine, EngineConfig
 from mavins.live.livefilter import GNSS_HEADING, FilterSettings
 from sim.aiding import GnssConfig, simulate_aiding
 from sim.generate import generate
 from sim.scenarios import load
+from support import feed_engine
 
 SIGMA_DEG = 0.5  # the receiver's heading 1-sigma (hdg_acc)
 N_RUNS = 10
@@ -44,21 +44,15 @@ def fly(seed: int, heading_from: float = 0.0):  # type: ignore[no-untyped-def]
     truth = run.exact.truth
     true_yaw = np.interp(g[:, 0], truth[:, 0], np.unwrap(np.radians(truth[:, 16])))  # the vehicle's yaw
     noise = np.random.default_rng([seed, 0x4EAD]).standard_normal(len(g)) * math.radians(SIGMA_DEG)
-    w, f = run.rates()
     init = run.init()
     eng = Engine(EngineConfig(lat=init.lat, lon=init.lon, alt=init.h, heading="auto", align=5.0,
                               filter=FilterSettings(spec="consumer", aiding=("gnss", "baro"))))
-    out, j = [], 0
-    for i, t in enumerate(run.t.tolist()):
-        while j < len(g) and g[j, 0] <= t:
-            r = g[j].tolist()
-            eng.on_gnss(r[0], r[1], r[2], r[3], (r[4], r[5], math.nan), r[7], r[8], r[9])
-            if r[0] >= heading_from:
-                eng.on_gnss_yaw(r[0], math.remainder(true_yaw[j] + noise[j], 2.0 * math.pi), math.radians(SIGMA_DEG))
-            j += 1
-        sol = eng.on_imu(ImuSample(t, tuple(w[i].tolist()), tuple(f[i].tolist()), None, 1, 1))
-        if sol is not None:
-            out.append((sol.row[0], sol.row[9], sol.unc.sigma_att[2]))
+
+    def heading(engine: Engine, j: int, fix: list) -> None:  # type: ignore[type-arg]
+        if fix[0] >= heading_from:
+            engine.on_gnss_yaw(fix[0], math.remainder(true_yaw[j] + noise[j], 2.0 * math.pi), math.radians(SIGMA_DEG))
+
+    out = feed_engine(eng, run, g, heading, row=lambda sol: (sol.row[0], sol.row[9], sol.unc.sigma_att[2]))
     return eng, np.array(out), truth[:, [0, 16]]
 
 

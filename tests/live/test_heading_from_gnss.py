@@ -16,11 +16,11 @@ import numpy as np
 import pytest
 
 from mavins.live.livefilter import FilterSettings
-from mavins.core.records import ImuSample
 from mavins.live.engine import GNSS_YAW, GNSS_YAW_PENDING, Engine, EngineConfig
 from sim.aiding import GnssConfig, simulate_aiding
 from sim.generate import generate
 from sim.scenarios import load
+from support import feed_engine
 
 T_MOTION = 36.8  # s: the flight's speed passes 1 m/s here (sim/scenarios/flight.toml: 10 s rest, 15 s climb, 5 s hover, accelerate)
 
@@ -30,19 +30,10 @@ def fly(seed: int, heading: float | str = "auto", duration: float = 70.0):  # ty
     the output rows (t, yaw, published yaw 1-sigma) and the truth (t, yaw deg)."""
     run = generate(load("flight"), duration=duration, rate=100.0, grade="consumer", seed=seed)
     g = simulate_aiding(run, GnssConfig(rate=5.0), None, None).gnss
-    w, f = run.rates()
     init = run.init()
     eng = Engine(EngineConfig(lat=init.lat, lon=init.lon, alt=init.h, heading=heading, align=5.0,
                               filter=FilterSettings(spec="consumer", aiding=("gnss", "baro"))))
-    out, j = [], 0
-    for i, t in enumerate(run.t.tolist()):
-        while j < len(g) and g[j, 0] <= t:
-            r = g[j].tolist()
-            j += 1
-            eng.on_gnss(r[0], r[1], r[2], r[3], (r[4], r[5], math.nan), r[7], r[8], r[9])
-        sol = eng.on_imu(ImuSample(t, tuple(w[i].tolist()), tuple(f[i].tolist()), None, 1, 1))
-        if sol is not None:
-            out.append((sol.row[0], sol.row[9], sol.unc.sigma_att[2]))
+    out = feed_engine(eng, run, g, row=lambda sol: (sol.row[0], sol.row[9], sol.unc.sigma_att[2]))
     truth = run.exact.truth
     return eng, np.array(out), truth[:, [0, 9]]
 

@@ -16,12 +16,12 @@ import math
 import numpy as np
 import pytest
 
-from mavins.core.records import ImuSample
 from mavins.live.engine import Engine, EngineConfig
 from mavins.live.livefilter import FilterSettings
 from sim.aiding import GnssConfig, simulate_aiding
 from sim.generate import generate
 from sim.scenarios import load
+from support import feed_engine
 
 OUTAGE = (60.0, 120.0)
 SEEDS = (1, 2, 3, 4, 5)
@@ -40,20 +40,11 @@ def drive(seed: int, aiding: tuple[str, ...]):  # type: ignore[no-untyped-def]
     run = generate(load("car"), rate=100.0, grade="industrial", seed=seed)
     g = simulate_aiding(run, GnssConfig(rate=5.0), None, None).gnss
     g = g[(g[:, 0] < OUTAGE[0]) | (g[:, 0] >= OUTAGE[1])]
-    w, f = run.rates()
     init = run.init()
     eng = Engine(EngineConfig(lat=init.lat, lon=init.lon, alt=init.h, heading=float(init.yaw), align=5.0,
                               filter=FilterSettings(spec="industrial", aiding=aiding)))
-    out, j = [], 0
-    for i, t in enumerate(run.t.tolist()):
-        while j < len(g) and g[j, 0] <= t:
-            r = g[j].tolist()
-            j += 1
-            eng.on_gnss(r[0], r[1], r[2], r[3], (r[4], r[5], math.nan), r[7], r[8], r[9])
-        sol = eng.on_imu(ImuSample(t, tuple(w[i].tolist()), tuple(f[i].tolist()), None, 1, 1))
-        if sol is not None:
-            out.append((sol.row[0], sol.row[1], sol.row[2], sol.unc.sigma_pos[0], sol.unc.sigma_pos[1]))
-    out = np.array(out)
+    out = np.array(feed_engine(eng, run, g, row=lambda sol: (sol.row[0], sol.row[1], sol.row[2],
+                                                               sol.unc.sigma_pos[0], sol.unc.sigma_pos[1])))
     truth = run.exact.truth
     k = np.clip(np.searchsorted(truth[:, 0], out[:, 0]), 0, len(truth) - 1)
     lat = np.radians(truth[k, 1])
