@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from support import EVENT_TIMEOUT_S, Feed, StampedReceiver, free_udp_port, wait_until, wait_until_read
+from support import EVENT_TIMEOUT_S, Feed, StampedReceiver, free_udp_port, udp_stats, wait_until
 
 from mavins.live.livefilter import FilterSettings
 from mavins.link import publish
@@ -88,7 +88,15 @@ class Running:
         self.feed.write(data)
 
     def read_all(self) -> None:
-        wait_until_read(self.port)
+        """Wait until the service has read everything sent; a service thread that died fails at once."""
+        def read() -> bool:
+            if self.failure or not self.thread.is_alive():
+                raise AssertionError(f"service thread died: {self.failure[0]!r}" if self.failure
+                                     else "service thread ended")
+            st = udp_stats(self.port)
+            return st is None or st[0] == 0
+
+        wait_until(read, f"everything sent to port {self.port} read")
 
     def stop(self) -> Summary:
         try:
@@ -265,7 +273,7 @@ def test_sys_status_reports_the_imu_healthy_once_navigating_and_the_rejections()
     def status_after() -> list:
         return [m for m in list(run.out.msgs)[mark:] if m.get_type() == "SYS_STATUS"]
 
-    got = wait_until(status_after, "a SYS_STATUS after the input was read")
+    got = wait_until(status_after, "a SYS_STATUS after the input was read", timeout=30.0)  # it comes every 1 s
     run.stop()
     m = got[0]
     assert m.onboard_control_sensors_present == imu_bits
