@@ -7,8 +7,8 @@ import sys
 from pathlib import Path
 
 from .options import (
-    EXIT_USAGE, _Outage, _delays, _filter_options, _imu_spec, _magnetic_options, _positive_int, _real,
-    _strapdown_options, _subparser
+    EXIT_USAGE, _Outage, _delays, _filter_options, _fleet_option_alone, _fleet_options, _imu_spec, _magnetic_options,
+    _real, _strapdown_options, _subparser
 )
 
 
@@ -29,11 +29,7 @@ def _add_nav(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--each", action="store_true",
                    help="navigate every IMU file on its own (not fused): each solution goes to "
                         "OUTPUT/<folder>/<name>.nav.csv, a bad file is reported and the others go on")
-    b.add_argument("--jobs", type=_positive_int(1, 1024), default=None, metavar="N",
-                   help="with --each: worker processes (default: every core)")
-    b.add_argument("--cluster", metavar="ADDRESS",
-                   help="with --each: run on the Dask cluster at ADDRESS (e.g. tcp://scheduler:8786) instead; "
-                        "OUTPUT/summary.csv gets one row per file either way")
+    _fleet_options(b)
     _strapdown_options(p)
     g = p.add_argument_group("aided navigation (with --gnss, --baro, --mag and/or --rest; docs/filter.md)")
     g.add_argument("--gnss", type=Path, metavar="GNSS.csv",
@@ -69,11 +65,9 @@ def _cmd_nav(args: argparse.Namespace) -> int:
     opts = NavOptions(input=args.input, strapdown=strapdown_from_options(args), timing=args.timing)
     if args.each:
         return _cmd_nav_each(args, opts)
-    for given, name in ((args.jobs, "--jobs"), (args.cluster, "--cluster")):
-        if given is not None:
-            print(f"mavins nav: error: {name} goes with --each (several files, each navigated on its own)",
-                  file=sys.stderr)
-            return EXIT_USAGE
+    refused = _fleet_option_alone(args, "nav", "several files, each navigated on its own")
+    if refused is not None:
+        return refused
     if args.init is None:
         print("mavins nav: error: --init INIT.json is required (the initial state)", file=sys.stderr)
         return EXIT_USAGE

@@ -7,7 +7,8 @@ import sys
 from pathlib import Path
 
 from .options import (
-    EXIT_USAGE, _apply_config, _engine_config, _ingest_config, _nav_options, _positive_int, _say, _subparser,
+    EXIT_USAGE, _apply_config, _engine_config, _fleet_option_alone, _fleet_options, _ingest_config, _nav_options, _say,
+    _subparser,
 )
 
 
@@ -25,10 +26,7 @@ def _add_replay(sub: argparse._SubParsersAction) -> None:
                         "OUTPUT/summary.csv gets one row per log (duration, samples, GNSS accepted/rejected, worst "
                         "test ratio, final sigmas, final state, error); a bad log is reported in its row and the "
                         "others go on (exit 2 if any failed)")
-    b.add_argument("--jobs", type=_positive_int(1, 1024), default=None, metavar="N",
-                   help="with --each: worker processes (default: every core)")
-    b.add_argument("--cluster", metavar="ADDRESS",
-                   help="with --each: run on the Dask cluster at ADDRESS (e.g. tcp://scheduler:8786) instead")
+    _fleet_options(b)
     _nav_options(p)
     p.set_defaults(func=_cmd_replay, parser=p)
 
@@ -37,11 +35,9 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     _apply_config(args, args.parser)
     if args.each:
         return _cmd_replay_each(args)
-    for given, name in ((args.jobs, "--jobs"), (args.cluster, "--cluster")):
-        if given is not None:
-            print(f"mavins replay: error: {name} goes with --each (several logs, each replayed on its own)",
-                  file=sys.stderr)
-            return EXIT_USAGE
+    refused = _fleet_option_alone(args, "replay", "several logs, each replayed on its own")
+    if refused is not None:
+        return refused
     if len(args.log) > 1:
         print(f"mavins replay: error: {len(args.log)} logs given: replay them with --each (one solution per log "
               "in the -o folder)", file=sys.stderr)

@@ -136,6 +136,25 @@ def _subparser(sub: argparse._SubParsersAction, name: str, help_text: str, descr
                           formatter_class=argparse.ArgumentDefaultsHelpFormatter, **kw)
 
 
+def _fleet_options(g: argparse._ArgumentGroup) -> None:
+    """``--jobs`` and ``--cluster`` of a command's ``--each`` (common/fleet.py, common/parallel.py)."""
+    g.add_argument("--jobs", type=_positive_int(1, 1024), default=None, metavar="N",
+                   help="with --each: worker processes (default: every core)")
+    g.add_argument("--cluster", metavar="ADDRESS",
+                   help="with --each: run on the Dask cluster at ADDRESS (e.g. tcp://scheduler:8786) instead; "
+                        "OUTPUT/summary.csv gets one row per input either way")
+
+
+def _fleet_option_alone(args: argparse.Namespace, command: str, each: str) -> int | None:
+    """EXIT_USAGE, said in one line, when ``--jobs`` or ``--cluster`` comes without ``--each`` (``each``: what
+    --each does, for the message); None when neither does."""
+    for given, name in ((args.jobs, "--jobs"), (args.cluster, "--cluster")):
+        if given is not None:
+            print(f"mavins {command}: error: {name} goes with --each ({each})", file=sys.stderr)
+            return EXIT_USAGE
+    return None
+
+
 def _strapdown_options(p: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
     """The strapdown settings nav, run and replay share, built from their one definition
     (mavins/core/settings.py; docs/conventions.md ``mavins nav``)."""
