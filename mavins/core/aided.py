@@ -54,6 +54,7 @@ are skipped):
 from __future__ import annotations
 
 import math
+import tempfile
 from typing import Any, Mapping, Sequence
 
 import numpy as np
@@ -61,6 +62,7 @@ from numba import literally
 
 from . import errmodel as em
 from . import kalman as kf
+from . import smoother as sm
 from . import strapdown as sd
 from .strapdown import GEOGRAPHIC
 from .errmodel import NX
@@ -106,6 +108,7 @@ MAG_INCL_GATE = math.radians(20.0)  # rad: a sample whose inclination differs mo
 MAG_RESET_AFTER = 50  # consecutive rejected magnetometer samples after which the hard iron is reset (apply_mag)
 MAG_STRENGTH_GATE = 0.2  # gauss: likewise for its strength (PX4 EKF2_MAG_CHK_STR), in the sample's unit where it is known
 
+SMOOTH_DT = 1.0  # s: the smoother's epochs between measurements are at most this far apart (navigate_aided)
 DEFAULT_SIGMA_H = 2.5  # m (docs/conventions.md GNSS file)
 DEFAULT_SIGMA_V = 5.0  # m
 DEFAULT_SIGMA_VEL = 0.3  # m/s
@@ -118,7 +121,8 @@ _DEG_H = math.degrees(1.0) * 3600.0  # rad/s -> deg/h
 @kernel
 def _propagate(s: np.ndarray, cfg: np.ndarray, spec: np.ndarray, P: np.ndarray, acc: np.ndarray, frame: int) -> None:
     """Propagate P over the pending interval ``acc[12]`` with its mean C (acc[0:9]), f^n (acc[9:12]), body
-    rate and specific force (acc[13:16], acc[16:19]: increments summed over the interval)."""
+    rate and specific force (acc[13:16], acc[16:19]: increments summed over the interval); an ``acc`` with
+    NX x NX more values also chains the propagation's Phi into the smoother's transition (smoother.py)."""
     literally(frame)
     if acc.shape[0] < ACC_SIZE or P.shape[0] != NX or P.shape[1] != NX:
         raise ValueError("the propagation needs acc of ACC_SIZE values and P of NX x NX")
@@ -135,6 +139,8 @@ def _propagate(s: np.ndarray, cfg: np.ndarray, spec: np.ndarray, P: np.ndarray, 
     em.motion_columns(F, c, acc[13:16] / T, acc[16:19] / T, spec)
     phi, qd = em.discretise(F, spec, T)
     kf.predict(P, phi, qd)
+    if acc.shape[0] >= ACC_SIZE + NX * NX:  # a smoothed run: the transition since the last epoch (smoother.py)
+        sm.chain_transition(acc[ACC_SIZE:], phi)
     for i in range(ACC_SIZE):
         acc[i] = 0.0
 
@@ -348,20 +354,44 @@ def apply_mag(s: np.ndarray, cfg: np.ndarray, bias: np.ndarray, P: np.ndarray, i
 def filter_row(P: np.ndarray, bias: np.ndarray, out: np.ndarray) -> None:
     """Write the filter's columns (kernel units) after the 14 solution columns of ``out``: the contract's
     21, then, when ``out`` has ROW_SIZE values, each STATE_BLOCKS block's estimate and 1-sigma."""
+    filter_sigmas(P, out)
+    filter_estimates(bias, out, 1.0, 0.0)
+
+
+@kernel
+def filter_estimates(bias: np.ndarray, out: np.ndarray, scale: float, keep: float) -> None:
+    """The estimate columns of a row (filter_row's layout) from a bias vector (kalman.B_* layout):
+    ``out = keep out + scale estimate`` (1, 0 writes them; -1, 1 subtracts a correction's)."""
+    k = OUT_SIZE
+    if out.shape[0] >= ROW_SIZE:
+        for b in range(len(_STATE_BLOCK_X)):
+            x0, n = _STATE_BLOCK_X[b], _STATE_BLOCK_N[b]
+            for i in range(n):
+                out[k + i] = keep * out[k + i] + scale * bias[x0 - em.X_SENSORS + i]
+            k += 2 * n
+    g = kf.gyro_bias_total(bias)
+    a = kf.accel_bias_total(bias)
+    for i in range(3):
+        out[23 + i] = keep * out[23 + i] + scale * g[i]
+        out[26 + i] = keep * out[26 + i] + scale * a[i]
+
+
+@kernel
+def filter_sigmas(P: np.ndarray, out: np.ndarray) -> None:
+    """The 1-sigma columns of a row (filter_row's layout) from P: position, velocity, attitude, the total
+    gyro and accelerometer biases (constant plus Gauss-Markov, their covariance included) and, when
+    ``out`` has ROW_SIZE values, each STATE_BLOCKS block's."""
     k = OUT_SIZE
     if out.shape[0] >= ROW_SIZE:  # a row of the contract's 35 columns only has no room for them
         for b in range(len(_STATE_BLOCK_X)):
             x0, n = _STATE_BLOCK_X[b], _STATE_BLOCK_N[b]
             for i in range(n):
-                out[k + i] = bias[x0 - em.X_SENSORS + i]
                 out[k + n + i] = np.sqrt(max(P[x0 + i, x0 + i], 0.0))
             k += 2 * n
     for i in range(3):
         out[14 + i] = np.sqrt(max(P[em.X_DP + i, em.X_DP + i], 0.0))
         out[17 + i] = np.sqrt(max(P[em.X_DV + i, em.X_DV + i], 0.0))
         out[20 + i] = np.sqrt(max(P[em.X_PHI + i, em.X_PHI + i], 0.0))
-    out[23:26] = kf.gyro_bias_total(bias)
-    out[26:29] = kf.accel_bias_total(bias)
     for i in range(3):
         g, a = em.X_BG + i, em.X_GG + i
         out[29 + i] = np.sqrt(max(P[g, g] + P[a, a] + 2.0 * P[g, a], 0.0))
@@ -395,8 +425,11 @@ def run_aided(
     log: np.ndarray,
     p_hist: np.ndarray,
     p_every: int,
-) -> tuple[int, int]:
-    """Batch aided navigation over increment rows; returns (output rows, NIS log rows).
+    store: np.ndarray,
+    active: np.ndarray,
+    smooth_dt: float,
+) -> tuple[int, int, int]:
+    """Batch aided navigation over increment rows; returns (output rows, NIS log rows, smoother epochs).
 
     ``s``, ``P`` (NX x NX) and ``bias`` (kalman.B_SIZE) are updated in place
     and can be passed to a following call over the next rows; measurement
@@ -412,6 +445,13 @@ def run_aided(
     receives P after every ``p_every``-th output row (rows p_every - 1,
     2 p_every - 1, ...) while it has room; pass an empty array to skip. Row
     layouts in the module docstring.
+
+    ``store`` (E, smoother.store_width(len(active))) receives the smoother's epochs
+    (smoother.record, over the ``active`` state indices) while it has room: the first
+    output row, every row at which a measurement is due (the propagation is
+    completed first, so that P^- is the prior at that time) and, between them,
+    a row at least every ``smooth_dt`` s where P was just propagated. An
+    empty store records nothing and leaves the filter as without it.
     """
     if out.shape[1] < ROW_SIZE or counts.shape[0] < len(KIND_NAMES) or (log.shape[0] > 0 and log.shape[1] < 6) \
             or P.shape[0] != NX or P.shape[1] != NX or bias.shape[0] != kf.B_SIZE:
@@ -432,7 +472,15 @@ def run_aided(
     while iz < static.shape[0] and static[iz, 1] < t_start:
         iz += 1
     gm_g = spec[em.SP_GYRO_GM] > 0.0
-    acc = np.zeros(ACC_SIZE)
+    smoothing = store.shape[0] > 0
+    acc = np.zeros(ACC_SIZE + NX * NX if smoothing else ACC_SIZE)
+    if smoothing:
+        sm.reset_transition(acc[ACC_SIZE:])
+    n_ep = 0
+    t_ep = -np.inf
+    Pm = np.empty((0, 0))
+    s_prior = np.empty(0)
+    bias_prior = np.empty(0)
     sums = np.zeros(7)
     sums[6] = s[sd.S_T]
     raw_sum = np.zeros(3)
@@ -465,6 +513,14 @@ def run_aided(
         for a in range(3):
             w_ib[a] = sums[a] / T
         after_k_update(s, cfg, spec, P, bias, acc, sums, predict_every, GEOGRAPHIC)
+        epoch = False
+        if smoothing:
+            due = (ig < gnss.shape[0] and gnss[ig, 0] <= tk) or (ib < baro.shape[0] and baro[ib, 0] <= tk) \
+                or (im < mag.shape[0] and mag[im, 0] <= tk) or (iz < static.shape[0] and static[iz, 0] <= tk)
+            epoch = due or n_out == 0 or (acc[12] == 0.0 and tk - t_ep >= smooth_dt)
+            if epoch:
+                _propagate(s, cfg, spec, P, acc, GEOGRAPHIC)  # P^- at tk: nothing pending
+                Pm, s_prior, bias_prior = P.copy(), s.copy(), bias.copy()
 
         # each measurement row: P propagated to it, updated; a row that changed nothing (rejected, disturbed,
         # no value) leaves P and the pending propagation as they were (_keep_or_undo)
@@ -545,13 +601,50 @@ def run_aided(
         row_out = out[n_out]
         sd.solution_row(s, cfg, row_out[0:14], GEOGRAPHIC)
         filter_row(P, bias, row_out)
+        if epoch:
+            dx = sm.nominal_difference(s_prior, bias_prior, s, bias, cfg)
+            n_ep = sm.record(store, n_ep, tk, n_out, Pm, P, acc[ACC_SIZE:], dx, active)
+            t_ep = tk
         n_out += 1
         if n_out % p_every == 0:
             j = n_out // p_every - 1
             if j < p_hist.shape[0]:
                 p_hist[j, :, :] = P
     _propagate(s, cfg, spec, P, acc, GEOGRAPHIC)  # P at the state's time for a following call
-    return n_out, n_log
+    return n_out, n_log, n_ep
+
+
+@kernel
+def smooth_rows(out: np.ndarray, n_out: int, store: np.ndarray, n_ep: int, active: np.ndarray) -> None:
+    """The forward rows ``out[:n_out]`` (kernel units) made smoothed in place, from a store after
+    smoother.backward: a row at epoch k is corrected by e^s_k (smoother.correct_solution; the estimates
+    less the correction's, filter_estimates) with the sigmas of P^s_k (filter_sigmas). A row between
+    epochs k and k + 1 lies on the forward nominal from k's posterior to k + 1's prior: its error and
+    covariance are interpolated linearly in time between ``e^s_k, P^s_k`` and ``e^s_{k+1} + dx_{k+1},
+    P^s_{k+1}`` (docs/postprocessing.md: the bound on what this leaves out). Rows after the last epoch
+    keep the forward values, as that epoch does (e^s_N = 0, P^s_N = P^+_N)."""
+    na = active.shape[0]
+    o_dx, o_e, o_pm, o_pp, o_phi = sm.store_slots(na)
+    e = np.zeros(NX)
+    Ps = np.zeros((NX, NX))
+    k = 0
+    for j in range(n_out):
+        while k + 1 < n_ep and store[k + 1, sm.EP_ROW] <= j:
+            k += 1
+        if k + 1 >= n_ep or store[k, sm.EP_ROW] > j:
+            break  # at or after the last epoch (or before the first: none is)
+        a, b = store[k], store[k + 1]
+        w = 0.0
+        if j > a[sm.EP_ROW]:
+            w = (out[j, 0] - a[sm.EP_T]) / (b[sm.EP_T] - a[sm.EP_T])
+        for p in range(na):
+            e[active[p]] = (1.0 - w) * a[o_e + p] + w * (b[o_e + p] + b[o_dx + p])
+            for q in range(na):
+                Ps[active[p], active[q]] = (1.0 - w) * a[o_pp + p * na + q] + w * b[o_pp + p * na + q]
+        row = out[j]
+        sm.correct_solution(row, e)
+        filter_estimates(e[em.X_SENSORS:], row, -1.0, 1.0)
+        filter_sigmas(Ps, row)
 
 
 def _columns(rows: Any, width: int, defaults: Sequence[float], name: str) -> np.ndarray:
@@ -649,6 +742,8 @@ def navigate_aided(
     baro_drift: float = 0.0,
     covariance_every: int = 0,
     file_units: bool = True,
+    smooth: bool = False,
+    smooth_dt: float = SMOOTH_DT,
     **options: Any,
 ) -> tuple[np.ndarray, dict[str, Any]]:
     """Aided navigation over a whole recording.
@@ -685,13 +780,18 @@ def navigate_aided(
         covariance_every: keep the full P after every this many output rows
             (stats ``P_history``, (M // covariance_every, NX, NX)); 0 = none.
         file_units: return rows in file units (:func:`to_file_units`), else kernel units.
+        smooth: return the fixed-interval smoothed rows (smoother.py, :func:`smooth_rows`) instead of the
+            forward filter's; the epochs and the rows are kept in an unlinked temporary file
+            (:func:`scratch`), so memory holds what the system pages in.
+        smooth_dt: with ``smooth``, an epoch at least every this many seconds between measurements (s).
         options: other strapdown.make_config options.
 
     Returns:
         ``(rows, stats)``: (M, ROW_SIZE) output rows (:func:`file_columns` picks a file's), and ``counts`` (kind ->
         (accepted, rejected)), ``nis`` (log rows, LOG_COLUMNS), ``P`` (final),
         ``bias`` (kalman.B_* layout), ``baro_offset`` (m), ``P_history``,
-        ``state`` (s), ``spec`` (the process-model vector used).
+        ``state`` (s), ``spec`` (the process-model vector used), with ``smooth`` also ``epochs`` (the
+        smoother's epoch count) and ``singular`` (epochs whose prior could not be inverted).
     """
     cfg = sd.make_config(samples=samples, **options)
     if predict_every < 1:
@@ -725,7 +825,16 @@ def navigate_aided(
     bias = np.zeros(kf.B_SIZE)
     lever = np.asarray(lever_arm, dtype=np.float64).reshape(3)
     n_out = t.shape[0] // int(cfg[sd.CFG_SAMPLES]) + 1
-    out = np.empty((n_out, ROW_SIZE))
+    if not smooth_dt > 0.0:
+        raise ValueError("smooth_dt must be > 0")
+    active = np.flatnonzero(np.diag(P) > 0.0)
+    if smooth:
+        out = scratch((n_out, ROW_SIZE))
+        n_ep = epoch_bound(t, g, b, m, z, float(smooth_dt))
+        store = scratch((min(n_ep, n_out), sm.store_width(active.shape[0])))
+    else:
+        out = np.empty((n_out, ROW_SIZE))
+        store = np.empty((0, sm.store_width(active.shape[0])))
     counts = np.zeros((len(KIND_NAMES), 2), dtype=np.int64)
     # one row per fix, baro, mag and attitude update (ZUPT), and per rest window a ZARU and the second
     # ZUPT of an update shared by two windows (one ends where the next starts)
@@ -734,14 +843,18 @@ def navigate_aided(
         raise ValueError("covariance_every must be >= 0")
     p_every = int(covariance_every) if covariance_every > 0 else n_out + 1
     p_hist = np.zeros((n_out // p_every if covariance_every > 0 else 0, NX, NX))
-    rows, n_log = run_aided(
+    rows, n_log, n_ep = run_aided(
         s, cfg, t, dth, dvel, g, b, m, z, sp, lever, math.radians(declination),
         math.nan if mag_inclination is None else math.radians(mag_inclination),
         math.nan if mag_strength is None else float(mag_strength),
         math.nan if mag_strength_gate is None else float(mag_strength_gate), float(gate), int(predict_every),
-        P, bias, out, counts, log, p_hist, p_every,
+        P, bias, out, counts, log, p_hist, p_every, store, active, float(smooth_dt),
     )
     result = out[:rows]
+    singular = 0
+    if smooth:
+        singular = sm.backward(store, n_ep, active.shape[0])
+        smooth_rows(out, rows, store, n_ep, active)
     stats: dict[str, Any] = {
         "counts": {name: (int(counts[k, 0]), int(counts[k, 1])) for k, name in enumerate(KIND_NAMES)},
         "nis": log[:n_log],
@@ -752,7 +865,33 @@ def navigate_aided(
         "state": s,
         "spec": sp,
     }
+    if smooth:
+        stats["epochs"], stats["singular"] = n_ep, singular
+        if file_units:
+            result *= unit_factors(ROW_COLUMNS)  # in place: the rows may be larger than memory
+        return result, stats
     return (to_file_units(result) if file_units else result), stats
+
+
+def scratch(shape: tuple[int, int]) -> np.ndarray:
+    """A float64 array of ``shape`` backed by an unlinked temporary file (the system's temporary
+    directory, TMPDIR): the operating system pages it, and frees it when the last view goes."""
+    with tempfile.TemporaryFile(prefix="mavins-") as fh:
+        fh.truncate(max(1, shape[0] * shape[1]) * 8)
+        return np.asarray(np.memmap(fh, dtype=np.float64, mode="r+", shape=shape))
+
+
+def epoch_bound(t: np.ndarray, gnss: np.ndarray, baro: np.ndarray, mag: np.ndarray, static: np.ndarray,
+                smooth_dt: float) -> int:
+    """At most how many smoother epochs run_aided records over these rows: one per measurement row, per
+    IMU row inside a rest window (a ZUPT each) and per window (its ZARU), one per ``smooth_dt`` of the
+    recording, and the first."""
+    n = gnss.shape[0] + baro.shape[0] + mag.shape[0] + 2 * static.shape[0] + 2
+    for t0, t1 in static[:, :2]:
+        n += int(np.count_nonzero((t > t0) & (t <= t1)))
+    if t.shape[0]:
+        n += int((t[-1] - t[0]) / smooth_dt) + 1
+    return n
 
 
 __all__ = [

@@ -23,9 +23,12 @@ EXPORTS = (
     # mavins nav: time and the increment (or rate) triads as views of the file's table, not copied
     Export("strapdown", "_run_increments", f"i8({V}, {V}, f8[:], f8[:, :], f8[:, :], {M})", frame=0, variant="views"),
     Export("strapdown", "_run_rates", f"i8({V}, {V}, f8[:], f8[:, :], f8[:, :], {M})", frame=0, variant="views"),
-    Export("aided", "run_aided", f"UniTuple(i8, 2)({V}, {V}, {V}, {M}, {M}, {M}, {M}, {M}, {M}, {V}, {V}, f8, f8, f8, f8, f8, i8, "
-                                 f"{M}, {V}, {M}, i8[:, ::1], {M}, {C}, i8)"),
+    Export("aided", "run_aided", f"UniTuple(i8, 3)({V}, {V}, {V}, {M}, {M}, {M}, {M}, {M}, {M}, {V}, {V}, f8, f8, f8, f8, f8, i8, "
+                                 f"{M}, {V}, {M}, i8[:, ::1], {M}, {C}, i8, {M}, i8[::1], f8)"),
     Export("runner", "degrees_in_place", f"none({M}, i8[::1])"),
+    # mavins nav --smooth: the backward pass and the smoothed rows
+    Export("smoother", "backward", f"i8({M}, i8, i8)"),
+    Export("aided", "smooth_rows", f"none({M}, i8, {M}, i8, i8[::1])"),
     Export("strapdown", "init_state", f"{V}(f8, f8, f8, f8, {V}, f8, f8, f8)"),
     Export("aided", "push_rate_aided",
            f"i8({V}, {V}, {V}, {M}, {V}, {V}, {V}, f8, f8, f8, f8, f8, f8, f8, i8)", frame=0),

@@ -21,7 +21,7 @@ from mavins.core import aided
 from mavins.core import errmodel as em
 from mavins.core import kalman as kf
 from mavins.core import strapdown as sd
-from support import A, E2, gamma, mag_by_hand
+from support import NO_SMOOTHING, A, E2, gamma, mag_by_hand
 
 LAT0, LON0, H0 = 45.0, 7.0, 100.0  # deg, deg, m
 DT = 0.01
@@ -262,10 +262,10 @@ def test_continued_runs_skip_rows_at_their_start() -> None:
         out = np.empty((len(t_rows) + 1, aided.ROW_SIZE))
         counts = np.zeros((len(aided.KIND_NAMES), 2), dtype=np.int64)
         log = np.empty((10, 6))
-        n, nl = aided.run_aided(s, cfg, np.ascontiguousarray(t_rows[:, 0]), np.ascontiguousarray(t_rows[:, 1:4]),
+        n, nl, _ = aided.run_aided(s, cfg, np.ascontiguousarray(t_rows[:, 0]), np.ascontiguousarray(t_rows[:, 1:4]),
                                 np.ascontiguousarray(t_rows[:, 4:7]), gnss, np.empty((0, 3)), np.empty((0, 5)),
                                 np.empty((0, 4)), spec, np.zeros(3), 0.0, math.nan, math.nan, math.nan, 5.0, 1, P, np.zeros(kf.B_SIZE), out, counts,
-                                log, np.zeros((0, em.NX, em.NX)), 100)
+                                log, np.zeros((0, em.NX, em.NX)), 100, *NO_SMOOTHING)
         return out[:n], counts, log[:nl]
 
     lat0 = math.radians(LAT0)
@@ -440,13 +440,14 @@ def run_direct(rows, bias=None, P=None, gnss=None, baro=None, mag=None, static=N
     counts = np.zeros((len(aided.KIND_NAMES), 2), dtype=np.int64)
     log = np.empty((40, 6))
     e = np.empty
-    n, nl = aided.run_aided(s, cfg, np.ascontiguousarray(rows[:, 0]), np.ascontiguousarray(rows[:, 1:4]),
+    n, nl, _ = aided.run_aided(s, cfg, np.ascontiguousarray(rows[:, 0]), np.ascontiguousarray(rows[:, 1:4]),
                             np.ascontiguousarray(rows[:, 4:7]), e((0, 10)) if gnss is None else np.array(gnss, float),
                             e((0, 3)) if baro is None else np.array(baro, float),
                             e((0, 5)) if mag is None else np.array(mag, float),
                             e((0, 4)) if static is None else np.array(static, float),
                             (spec or em.ImuSpec()).as_array(), np.zeros(3), 0.0, math.nan, math.nan, math.nan, 5.0, predict_every, P, bias, out,
-                            counts, log, np.zeros((0, em.NX, em.NX)) if p_hist is None else p_hist, p_every)
+                            counts, log, np.zeros((0, em.NX, em.NX)) if p_hist is None else p_hist, p_every,
+                            *NO_SMOOTHING)
     return s, P, bias, out[:n], counts, log[:nl]
 
 

@@ -60,7 +60,7 @@ from mavins.core.rotation import dcm_to_euler, euler_to_dcm, quat_to_dcm, rotvec
 from sim import aiding, errors
 from sim.generate import generate
 from sim.scenarios import Scenario, load
-from support import quat_error, wrap_rad
+from support import NO_SMOOTHING, quat_error, wrap_rad
 
 N_RUNS = 50
 DURATION = 120.0
@@ -519,10 +519,10 @@ def test_run_continues_across_calls(trajectory) -> None:
     def call(s, P, bias, rows):
         out = np.empty((rows.stop - rows.start, aided.ROW_SIZE))
         counts = np.zeros((len(aided.KIND_NAMES), 2), dtype=np.int64)
-        n, _ = aided.run_aided(s, cfg, np.ascontiguousarray(imu[rows, 0]), np.ascontiguousarray(imu[rows, 1:4]),
+        n, _, _ = aided.run_aided(s, cfg, np.ascontiguousarray(imu[rows, 0]), np.ascontiguousarray(imu[rows, 1:4]),
                                np.ascontiguousarray(imu[rows, 4:7]), g, np.empty((0, 3)), np.empty((0, 5)), empty,
                                spec, np.zeros(3), 0.0, math.nan, math.nan, math.nan, 5.0, 1, P, bias, out, counts, np.empty((0, 6)),
-                               np.empty((0, em.NX, em.NX)), 1)
+                               np.empty((0, em.NX, em.NX)), 1, *NO_SMOOTHING)
         return out[:n], counts
 
     s, P, bias = fresh()
@@ -944,3 +944,58 @@ def test_without_the_states_the_filter_is_overconfident(trajectory, which: str) 
     else:
         anees = np.mean(np.array(mc["nees"]["att"]), axis=0).mean()
         assert anees > band(3, N_SENSOR)[1], anees
+
+
+SMOOTH_RUNS = 40
+OUTAGE = (40.0, 100.0)  # s: 60 s without GNSS through the flight's turns, 20 s of fixes after it
+
+
+@pytest.fixture(scope="module")
+def smoothed_outage(trajectory):
+    """SMOOTH_RUNS runs with a 60 s outage, each navigated forward and smoothed (navigate_aided smooth=True):
+    their errors and 1-sigma columns every EVERY rows (1 Hz), and the rows' times."""
+    cfg = dataclasses.replace(GNSS, outages=(OUTAGE,))
+    out = {"fwd": [], "smo": [], "sig": [], "epochs": [], "singular": []}
+    for r in range(SMOOTH_RUNS):
+        imu, gnss, init, bg, ba = simulate_run(trajectory, 2000 + r, cfg)
+        idx = None
+        for key, smooth in (("fwd", False), ("smo", True)):
+            rows, st = aided.navigate_aided(imu, init, gnss, static=STATIC, spec="consumer", file_units=False,
+                                            smooth=smooth)
+            idx = 2 * (np.arange(rows.shape[0]) + 1)
+            sel = np.arange(EVERY - 1, rows.shape[0], EVERY)
+            out[key].append(nav_errors(rows, trajectory.exact.truth[idx])[sel])
+            if smooth:
+                out["sig"].append(np.column_stack([rows[sel, 20:23], rows[sel, 17:20], rows[sel, 14:17]]))
+                out["epochs"].append(st["epochs"])
+                out["singular"].append(st["singular"])
+                out["t"] = rows[sel, 0]
+    return {k: np.array(v) if k != "t" else v for k, v in out.items()}
+
+
+def test_smoother_cuts_the_outage_error_at_least_fivefold(smoothed_outage) -> None:
+    """Issue 34's bound: inside the 60 s outage the smoothed horizontal position RMS (over runs and 1 Hz
+    epochs) is at most a fifth of the forward filter's (the fix after the gap constrains the path in it)."""
+    t = smoothed_outage["t"]
+    w = (t > OUTAGE[0]) & (t < OUTAGE[1])
+
+    def rms(e: np.ndarray) -> float:
+        return math.sqrt(np.mean(np.sum(e[:, w, 6:8] ** 2, axis=2)))
+
+    assert rms(smoothed_outage["smo"]) <= rms(smoothed_outage["fwd"]) / 5.0, (rms(smoothed_outage["smo"]),
+                                                                              rms(smoothed_outage["fwd"]))
+    assert not smoothed_outage["singular"].any()
+
+
+@pytest.mark.parametrize("window", ["run", "outage"])
+@pytest.mark.parametrize("block, o", [("att", 0), ("vel", 3), ("pos", 6)])
+def test_smoothed_errors_are_inside_their_sigma(smoothed_outage, window: str, block: str, o: int) -> None:
+    """The smoothed errors against the smoothed 1-sigma columns: per block the sum of the three squared
+    normalised errors has mean 3 whatever their correlation; its mean over the runs lies in the band of
+    3 chi2(N)/N (the fully correlated case, the widest; 99 %), and its time average (1 Hz, over the
+    whole run or the outage) at most as widely, as in test_monte_carlo_nees."""
+    t = smoothed_outage["t"]
+    w = np.ones(t.shape, bool) if window == "run" else (t > OUTAGE[0]) & (t < OUTAGE[1])
+    z2 = np.sum((smoothed_outage["smo"][:, w, o:o + 3] / smoothed_outage["sig"][:, w, o:o + 3]) ** 2, axis=2)
+    lo, hi = band99(1, SMOOTH_RUNS)
+    assert 3.0 * lo < z2.mean() < 3.0 * hi, (block, window, z2.mean(), 3.0 * lo, 3.0 * hi)
