@@ -151,6 +151,7 @@ class AidingFiles:
     scale_factors: bool = False  # estimate the grade's (or the spec's) gyro and accelerometer scale factors
     mag_unit: str | None = None  # the magnetometer file's unit (MAG_UNITS), None: not known
     misalignment: bool = False  # estimate the grade's (or the spec's) gyro and accelerometer misalignments
+    smooth: bool = False  # write the fixed-interval smoothed solution instead of the forward filter's
 
     def field_at(self, lat_deg: float, lon_deg: float, h_m: float) -> dict[str, float | None]:
         """navigate_aided's magnetic keywords at the initial position: the declination (deg), the given one
@@ -309,15 +310,19 @@ def run_nav_aided(imu_path: Path, init_path: Path, out_path: Path, opts: NavOpti
         rows, stats = aided.navigate_aided(
             imu, init_keys, gnss, baro, mag=mag, static=static, spec=spec, lever_arm=lever_arm, gate=gate,
             mag_bias=aiding.mag_bias, **field,
-            scale_factors=aiding.scale_factors, misalignment=aiding.misalignment,
+            scale_factors=aiding.scale_factors, misalignment=aiding.misalignment, smooth=aiding.smooth,
             **{k: v for k, v in opts.strapdown.keywords().items() if k != "imu_rates"})
     except ValueError as exc:
         raise files.DataFileError(str(exc)) from None
     t_compute = time.perf_counter() - t_start - t_read
     with files.atomic_output(out_path) as tmp:
         keep = aided.file_columns(stats["spec"], aiding.mag_bias)
-        files.write_table(tmp, tuple(aided.ROW_COLUMNS[i] for i in keep), rows[:, keep])
+        files.write_table(tmp, tuple(aided.ROW_COLUMNS[i] for i in keep), rows, keep)
     t_write = time.perf_counter() - t_start - t_read - t_compute
+    if aiding.smooth:
+        print(f"mavins nav: smoothed over {stats['epochs']} epochs"
+              + (f"; at {stats['singular']} of them the prior could not be inverted and the forward solution "
+                 "was kept" if stats["singular"] else ""), file=sys.stderr)
     if opts.timing:
         t_sd = _strapdown_seconds(imu, init_keys, opts)
         print(f"timing: samples={imu.shape[0]} read_s={t_read:.3f} compute_s={t_compute:.3f} write_s={t_write:.3f} "

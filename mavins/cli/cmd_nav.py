@@ -8,7 +8,7 @@ from pathlib import Path
 
 from .options import (
     EXIT_USAGE, _Outage, _delays, _filter_options, _fleet_option_alone, _fleet_options, _imu_spec, _magnetic_options,
-    _real, _strapdown_options, _subparser
+    _real, _smooth_option, _strapdown_options, _subparser
 )
 
 
@@ -47,6 +47,7 @@ def _add_nav(sub: argparse._SubParsersAction) -> None:
                         "every attitude update inside it and a zero-rate update (the gyro bias) at its end; "
                         "repeatable")
     _filter_options(g, with_aiding=False)
+    _smooth_option(g)
     p.add_argument("--timing", action="store_true", help="print read/compute/write seconds to stderr")
     r = p.add_argument_group("redundant IMUs (several IMU files; noise from --grade/--imu-spec; docs/redundancy.md)")
     r.add_argument("--fdi-log", type=Path, metavar="FDI.csv",
@@ -75,6 +76,10 @@ def _cmd_nav(args: argparse.Namespace) -> int:
         if len(args.imu) > 1 or args.fdi_log is not None:
             return _cmd_nav_fdi(args, opts)
         if args.gnss is None and args.baro is None and args.mag is None and args.rest is None:
+            if args.smooth:
+                print("mavins nav: error: --smooth smooths the aided solution: give --gnss, --baro, --mag or --rest",
+                      file=sys.stderr)
+                return EXIT_USAGE
             rows = run_nav(args.imu[0], args.init, args.output, opts)
         else:
             from ..nav import AidingFiles, run_nav_aided
@@ -83,7 +88,7 @@ def _cmd_nav(args: argparse.Namespace) -> int:
                                          AidingFiles(args.gnss, args.baro, args.mag, args.declination,
                                                      tuple(args.rest or ()), args.date, _delays(args),
                                                      args.mag_bias, args.scale_factors, args.mag_unit,
-                                                     args.misalignment),
+                                                     args.misalignment, args.smooth),
                                          _imu_spec(args), args.lever_arm, args.gate)
             for kind, (ok, bad) in counts.items():
                 if ok or bad:
@@ -102,7 +107,8 @@ def _cmd_nav_each(args: argparse.Namespace, opts: object) -> int:
     from ..nav import run_nav_batch
 
     bad = [name for name, v in (("--gnss", args.gnss), ("--baro", args.baro), ("--mag", args.mag),
-                                ("--rest", args.rest), ("--fdi-log", args.fdi_log)) if v is not None]
+                                ("--rest", args.rest), ("--fdi-log", args.fdi_log),
+                                ("--smooth", args.smooth or None)) if v is not None]
     if bad:
         print(f"mavins nav: error: --each navigates free inertial; {', '.join(bad)} cannot go with it",
               file=sys.stderr)

@@ -204,6 +204,14 @@ def _filter_options(g: argparse._ArgumentGroup, with_aiding: bool = True) -> Non
                             "time (default 0: the stamp is the time of measurement)")
 
 
+def _smooth_option(g: argparse._ArgumentGroup) -> None:
+    """--smooth (nav, replay): the fixed-interval smoothed solution (docs/postprocessing.md)."""
+    g.add_argument("--smooth", action="store_true",
+                   help="write the fixed-interval smoothed solution (Rauch-Tung-Striebel over the whole run: every "
+                        "measurement, later ones too, informs every row) in the same columns instead of the forward "
+                        "filter's; kept in a temporary file while it runs (TMPDIR; docs/postprocessing.md)")
+
+
 DELAYED = (("gnss", "GNSS fix"), ("baro", "barometric height"), ("mag", "magnetometer sample"))  # --KIND-delay
 
 

@@ -735,12 +735,15 @@ class TableWriter:
         self.close()
 
 
-def write_table(path: str | Path, columns: tuple[str, ...], data: np.ndarray) -> None:
-    """Write a table (CSV with a header line and round-trip floats, or parquet by the suffix)."""
+def write_table(path: str | Path, columns: tuple[str, ...], data: np.ndarray, keep: np.ndarray | None = None) -> None:
+    """Write a table (CSV with a header line and round-trip floats, or parquet by the suffix); ``keep``: the
+    columns of ``data`` to write (default all), picked a piece of rows at a time (``data`` may be larger
+    than memory: a file-backed array)."""
     with TableWriter(path, columns) as w:
         chunk = 1 << 18
         for start in range(0, data.shape[0], chunk):
-            w.write(data[start : start + chunk])
+            piece = data[start : start + chunk]
+            w.write(piece if keep is None else piece[:, keep])
 
 
 def read_solution(path: str | Path) -> np.ndarray:

@@ -615,28 +615,30 @@ def run_aided(
 
 
 @kernel
-def smooth_rows(out: np.ndarray, n_out: int, store: np.ndarray, n_ep: int, active: np.ndarray) -> None:
+def smooth_rows(out: np.ndarray, n_out: int, row_epoch: np.ndarray, store: np.ndarray, n_ep: int,
+                active: np.ndarray) -> None:
     """The forward rows ``out[:n_out]`` (kernel units) made smoothed in place, from a store after
-    smoother.backward: a row at epoch k is corrected by e^s_k (smoother.correct_solution; the estimates
-    less the correction's, filter_estimates) with the sigmas of P^s_k (filter_sigmas). A row between
-    epochs k and k + 1 lies on the forward nominal from k's posterior to k + 1's prior: its error and
-    covariance are interpolated linearly in time between ``e^s_k, P^s_k`` and ``e^s_{k+1} + dx_{k+1},
-    P^s_{k+1}`` (docs/postprocessing.md: the bound on what this leaves out). Rows after the last epoch
-    keep the forward values, as that epoch does (e^s_N = 0, P^s_N = P^+_N)."""
+    smoother.backward; ``row_epoch[j]`` is how many epochs had been recorded when row j was written.
+
+    Row j's nominal is the posterior of its last epoch k (= row_epoch[j] - 1) carried forward, on the
+    way to the prior of epoch k + 1: its error and covariance are interpolated linearly in time between
+    ``e^s_k, P^s_k`` and ``e^s_{k+1} + dx_{k+1}, P^s_{k+1}`` (at t_k: those of epoch k; at t_{k+1}, a row
+    written before that epoch's measurements: its prior's); docs/postprocessing.md bounds what this leaves
+    out. The row is corrected by that error (smoother.correct_solution; the estimates less the error's,
+    filter_estimates) and takes that covariance's sigmas (filter_sigmas). Rows before the first epoch and
+    from the last on keep the forward values, as the last epoch does (e^s_N = 0, P^s_N = P^+_N)."""
     na = active.shape[0]
     o_dx, o_e, o_pm, o_pp, o_phi = sm.store_slots(na)
     e = np.zeros(NX)
     Ps = np.zeros((NX, NX))
-    k = 0
     for j in range(n_out):
-        while k + 1 < n_ep and store[k + 1, sm.EP_ROW] <= j:
-            k += 1
-        if k + 1 >= n_ep or store[k, sm.EP_ROW] > j:
-            break  # at or after the last epoch (or before the first: none is)
+        k = row_epoch[j] - 1
+        if k < 0 or k + 1 >= n_ep:
+            continue
         a, b = store[k], store[k + 1]
-        w = 0.0
-        if j > a[sm.EP_ROW]:
-            w = (out[j, 0] - a[sm.EP_T]) / (b[sm.EP_T] - a[sm.EP_T])
+        w = 1.0
+        if b[sm.EP_T] > a[sm.EP_T]:
+            w = min(max((out[j, 0] - a[sm.EP_T]) / (b[sm.EP_T] - a[sm.EP_T]), 0.0), 1.0)
         for p in range(na):
             e[active[p]] = (1.0 - w) * a[o_e + p] + w * (b[o_e + p] + b[o_dx + p])
             for q in range(na):
@@ -854,7 +856,8 @@ def navigate_aided(
     singular = 0
     if smooth:
         singular = sm.backward(store, n_ep, active.shape[0])
-        smooth_rows(out, rows, store, n_ep, active)
+        row_epoch = np.searchsorted(store[:n_ep, sm.EP_ROW], np.arange(rows), side="right")
+        smooth_rows(out, rows, row_epoch, store, n_ep, active)
     stats: dict[str, Any] = {
         "counts": {name: (int(counts[k, 0]), int(counts[k, 1])) for k, name in enumerate(KIND_NAMES)},
         "nis": log[:n_log],

@@ -28,7 +28,7 @@ EXPORTS = (
     Export("runner", "degrees_in_place", f"none({M}, i8[::1])"),
     # mavins nav --smooth: the backward pass and the smoothed rows
     Export("smoother", "backward", f"i8({M}, i8, i8)"),
-    Export("aided", "smooth_rows", f"none({M}, i8, {M}, i8, i8[::1])"),
+    Export("aided", "smooth_rows", f"none({M}, i8, i8[::1], {M}, i8, i8[::1])"),
     Export("strapdown", "init_state", f"{V}(f8, f8, f8, f8, {V}, f8, f8, f8)"),
     Export("aided", "push_rate_aided",
            f"i8({V}, {V}, {V}, {M}, {V}, {V}, {V}, f8, f8, f8, f8, f8, f8, f8, i8)", frame=0),

@@ -233,7 +233,7 @@ def test_smooth_rows_interpolates_between_epochs_and_keeps_the_rows_after_the_la
     out[:, 23] = 5e-4  # forward gyro bias x
     out[:, 29] = 7e-3  # forward sigma_bg_x
     fwd = out.copy()
-    aided.smooth_rows(out, 6, store, 2, act)
+    aided.smooth_rows(out, 6, np.array([1, 1, 1, 1, 2, 2]), store, 2, act)
     r_n = earth.radii(lat)[0] + 100.0
     for j, (e_n, e_b, var_n, var_b) in {0: (2.0, 1e-4, 4.0, 1e-8), 2: (3.0, 2e-4, 10.0, 2e-8)}.items():
         assert out[j, 1] == pytest.approx(lat - e_n / r_n, abs=1e-15)
@@ -241,3 +241,20 @@ def test_smooth_rows_interpolates_between_epochs_and_keeps_the_rows_after_the_la
         assert out[j, 14] == pytest.approx(math.sqrt(var_n), rel=1e-15)
         assert out[j, 29] == pytest.approx(math.sqrt(var_b), rel=1e-15)
     np.testing.assert_array_equal(out[4:], fwd[4:])
+
+
+def test_a_row_written_before_its_epochs_measurements_takes_the_prior_error() -> None:
+    """A row at t_1 written before epoch 1 was recorded (a late measurement applied after the row went out,
+    as on the live path): its nominal is epoch 1's prior, so it is corrected by e^s_1 + dx_1 with P^s_1."""
+    act = np.array([em.X_DP])
+    store = np.zeros((2, smoother.store_width(1)))
+    store[:, 0] = (0.0, 1.0)
+    store[0, 3], store[1, 2] = 2.0, 4.0  # e^s_0 = 2 m; dx_1 = 4 m (e^s_1 = 0)
+    store[0, 5], store[1, 5] = 4.0, 16.0  # P^s_0, P^s_1
+    out = np.zeros((2, aided.ROW_SIZE))
+    lat = math.radians(47.0)
+    out[:, 0], out[:, 1], out[:, 10] = (1.0, 1.0), lat, 1.0
+    aided.smooth_rows(out, 2, np.array([1, 2]), store, 2, act)
+    r_n = earth.radii(lat)[0]
+    assert out[0, 1] == pytest.approx(lat - 4.0 / r_n, abs=1e-15) and out[0, 14] == pytest.approx(4.0)
+    assert out[1, 1] == lat and out[1, 14] == 0.0  # at the last epoch: the forward row
