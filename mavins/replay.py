@@ -42,6 +42,7 @@ from .link.ingest import HIGHRES_ACC_GYRO, HIGHRES_MAG, IMU_MESSAGES, IngestConf
 from .link import publish
 from .link.mavlink import mavlink
 from .live.pipeline import GNSS_MESSAGES, UINT16_UNKNOWN, Pipeline
+from .live.smoothing import KeptRows
 from .common.progress import Progress
 
 DF_HEAD = b"\xa3\x95"
@@ -114,6 +115,7 @@ class ReplayResult:
     t_first: float | None = None  # sensor time of the first and last accepted IMU sample
     t_last: float | None = None
     aiding: Counter = field(default_factory=Counter)  # GNSS and baro messages fed to the pipeline, by type
+    smoothed: tuple[int, int] | None = None  # --smooth: the smoother's epochs and those whose prior was singular
 
 
 # -- format checks ----------------------------------------------------------------------------
@@ -756,6 +758,8 @@ def replay(
     n_msg = n_out = 0
     t_first: float | None = None
     aiding: Counter = Counter()
+    kept = KeptRows() if engine_cfg.filter.smooth and engine_cfg.filter.aiding else None
+    smoothed = None
     with files.atomic_outputs([out_csv, rerun]) as (tmp_csv, tmp_rrd):
         writer = None
         try:
@@ -764,7 +768,7 @@ def replay(
 
                 recorder = Recorder(tmp_rrd, serve=False, app="mavins-replay", live=False)
             pipeline = Pipeline(engine_cfg, ingest_cfg, recorder=recorder)
-            writer = SolutionWriter(tmp_csv, pipeline.columns) if tmp_csv is not None else None
+            writer = SolutionWriter(tmp_csv, pipeline.columns) if tmp_csv is not None and kept is None else None
             n_skips = 0
             with Progress(f"replay {path.name}", 1.0) as bar:
                 for frac, msg in messages:
@@ -777,7 +781,9 @@ def replay(
                     out: Solution | None = pipeline.handle(msg)
                     if out is not None:
                         n_out += 1
-                        if writer is not None:
+                        if kept is not None:
+                            kept.add(pipeline.engine.filter.output_row(out.row), pipeline.engine.filter.epochs)
+                        elif writer is not None:
                             writer.write(pipeline.file_row(out))
                         if on_output is not None:
                             on_output(out, pipeline)
@@ -790,6 +796,8 @@ def replay(
                 if not any(aiding[k] for k in GNSS_MESSAGES):
                     report.notes.append(NO_GNSS)
                 bar.update(1.0)
+            if kept is not None and n_out:
+                smoothed = _write_smoothed(kept, pipeline, tmp_csv, recorder)
         finally:
             if writer is not None:
                 writer.close()
@@ -800,7 +808,25 @@ def replay(
         if n_out == 0:
             raise DataFileError(_no_solution(path, engine_cfg, pipeline, t_first))
     last = pipeline.last_sample
-    return ReplayResult(n_msg, n_out, pipeline, report, t_first, last.t if last is not None else None, aiding)
+    return ReplayResult(n_msg, n_out, pipeline, report, t_first, last.t if last is not None else None, aiding,
+                        smoothed)
+
+
+def _write_smoothed(kept: KeptRows, pipeline: Pipeline, tmp_csv: Path | None,
+                    recorder: object | None) -> tuple[int, int]:
+    """--smooth: the kept rows smoothed (live/smoothing.py), recorded beside the forward solution and
+    written in the solution file's columns; returns the epochs and those whose prior was singular."""
+    from .core import aided
+
+    f = pipeline.engine.filter
+    rows, singular = kept.smooth(f.epochs)
+    origin = pipeline.engine.origin
+    if recorder is not None and origin is not None:
+        recorder.on_smoothed(rows, origin)  # type: ignore[attr-defined]
+    if tmp_csv is not None:
+        rows *= aided.unit_factors(aided.ROW_COLUMNS)  # in place: file-backed
+        files.write_table(tmp_csv, pipeline.columns, rows, aided.file_columns(f.spec, f.settings.sigma_mag_bias))
+    return (f.epochs.count if f.epochs is not None else 0), singular
 
 
 def replay_outcome(job: tuple[Path, Path, EngineConfig, IngestConfig]) -> Outcome:

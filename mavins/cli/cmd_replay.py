@@ -8,7 +8,7 @@ from pathlib import Path
 
 from .options import (
     EXIT_USAGE, _apply_config, _engine_config, _fleet_option_alone, _fleet_options, _ingest_config, _nav_options, _say,
-    _subparser,
+    _smooth_option, _subparser,
 )
 
 
@@ -28,6 +28,7 @@ def _add_replay(sub: argparse._SubParsersAction) -> None:
                         "others go on (exit 2 if any failed)")
     _fleet_options(b)
     _nav_options(p)
+    _smooth_option(p.add_argument_group("post-processing (docs/postprocessing.md)"))
     p.set_defaults(func=_cmd_replay, parser=p)
 
 
@@ -43,6 +44,10 @@ def _cmd_replay(args: argparse.Namespace) -> int:
               "in the -o folder)", file=sys.stderr)
         return EXIT_USAGE
     args.log = args.log[0]
+    if args.smooth and not args.aiding:
+        print("mavins replay: error: --smooth smooths the aided solution: it cannot go with --aiding none",
+              file=sys.stderr)
+        return EXIT_USAGE
     from ..common.files import DataFileError, ResourceError, check_outputs
     from ..replay import replay
 
@@ -60,6 +65,10 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     print(f"mavins replay: {res.messages} messages, {res.outputs} solution rows to {args.output}; "
           f"final state {eng.state.value}" + (f", heading from {eng.heading_used}" if eng.heading_used else ""),
           file=sys.stderr)
+    if res.smoothed is not None:
+        print(f"mavins replay: smoothed over {res.smoothed[0]} epochs"
+              + (f"; at {res.smoothed[1]} of them the prior could not be inverted and the forward solution was "
+                 "kept" if res.smoothed[1] else ""), file=sys.stderr)
     if res.report is not None and res.report.damaged:
         print(f"mavins replay: warning: replayed what could be read: IMU samples from sensor time "
               f"{res.t_first:.3f} to {res.t_last:.3f} s", file=sys.stderr)

@@ -500,7 +500,7 @@ def _engine_config(args: argparse.Namespace):  # type: ignore[no-untyped-def]
 
     flt = FilterSettings(spec=_imu_spec(args), aiding=args.aiding, gate=args.gate, lever_arm=args.lever_arm,
                          delays=_delays(args), sigma_mag_bias=args.mag_bias, scale_factors=args.scale_factors,
-                         misalignment=args.misalignment)
+                         misalignment=args.misalignment, smooth=getattr(args, "smooth", False))
     from ..core.settings import strapdown_from_options
 
     strapdown = strapdown_from_options(args)

@@ -486,6 +486,8 @@ class Engine:
                          math.radians(lon), sigma_h * sigma_h, vn, ve, sigma_vel * sigma_vel)
         self._gsf = None
         self.filter.free = kalman.ALL
+        if self.filter.epochs is not None:  # the solution jumped without an update: the smoother starts anew
+            self.filter.restart_epochs(s)
         self.heading_used = source
         self.counters["yaw_resets"] += 1
         self._event("INFO", f"{text}, the solution turned by {math.degrees(dpsi):.2f} deg and put on the fix")

@@ -18,11 +18,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..core import aided, earth, errmodel, kalman
+from ..core import aided, earth, errmodel, kalman, smoother
 from ..core import strapdown as sd
 from ..core.frames import north_east_error
 from ..core.jit import for_frame
 from ..core.records import Uncertainty
+from .smoothing import EpochLog
 
 AIDING_KINDS = ("gnss", "baro", "mag", "zupt", "nhc")
 ABS_TIMEOUT_S = 5.0  # s of sensor time after the last accepted fix during which position counts as absolute
@@ -61,6 +62,7 @@ class FilterSettings:
     sigma_nhc: float = 0.1  # m/s: the non-holonomic constraint's sideways and vertical body velocity (ground vehicles)
     predict_dt: float = 0.01  # s: the covariance is propagated at about this interval
     delays: dict[str, float] = field(default_factory=dict)  # s by kind (gnss, baro, mag): measured this long before its stamp
+    smooth: bool = False  # keep the smoother's epochs (EpochLog) for a fixed-interval smoothed solution afterwards
 
 
 @dataclass
@@ -102,6 +104,7 @@ class LiveFilter:
         self._incl = np.zeros(kalman.MAG_STATS)  # running sums over the accepted magnetometer samples
         self.free = kalman.ALL  # the states an update may correct (kalman.update); the engine holds the heading back
         self._kept = False  # whether the measurement being applied changed the filter (_apply)
+        self.epochs: EpochLog | None = None  # the smoother's epochs since the last start (settings.smooth)
         self._bind(sd.GEOGRAPHIC)
 
     def _bind(self, frame: int) -> None:
@@ -129,9 +132,11 @@ class LiveFilter:
             if bias_window_s > 0.0 else 0.0
         self.bias[:] = 0.0
         kalman.calibrated_gyro_bias(self.P, self.bias, np.asarray(gyro_bias, dtype=float), var)
-        self.acc[:] = 0.0
+        self.acc = np.zeros(aided.ACC_SIZE + (errmodel.NX ** 2 if st.smooth else 0))
         self.sums[:] = 0.0
         self.sums[6] = sd.state_time(s)
+        if st.smooth:
+            self.restart_epochs(s)
         self._t_prev_k = sd.state_time(s)
         self._T_k = 0.0
         self._incl = aided.mag_stats(self.P)  # running sums of aided.apply_mag
@@ -142,6 +147,15 @@ class LiveFilter:
         self.ratios.clear()
         self.last_pos_t = self.last_hgt_t = -math.inf
         self.glitch = False
+
+    def restart_epochs(self, s: np.ndarray) -> None:
+        """A new smoother log from the state s on (at every start, and after a reset that moved the
+        solution without an update, such as the heading's): the smoother never reaches across one, and
+        the rows written before it keep the forward solution (docs/postprocessing.md)."""
+        smoother.reset_transition(self.acc[aided.ACC_SIZE:])
+        self.epochs = EpochLog(np.flatnonzero(np.diag(self.P) > 0.0),
+                               0 if self.epochs is None else self.epochs.generation + 1)
+        self.epochs.record(sd.state_time(s), self.P, self.P, self.acc, np.zeros(errmodel.NX))
 
     def level_sigma_deg(self) -> float:
         """1-sigma of the coarse level (deg): the accelerometer bias over g (textbook ch. 4 limit),
@@ -173,6 +187,9 @@ class LiveFilter:
                               w[0], w[1], w[2], f[0], f[1], f[2], self.predict_every)
         if r == 1:
             tk = sd.state_time(s)
+            ep = self.epochs
+            if ep is not None and self.acc[12] == 0.0 and tk - ep.t_last >= aided.SMOOTH_DT:
+                ep.record(tk, self.P, self.P, self.acc, np.zeros(errmodel.NX))  # none for a while: one anyway
             T = tk - self._t_prev_k
             self._t_prev_k = tk
             if T > 0.0:
@@ -223,10 +240,16 @@ class LiveFilter:
     def _apply(self, s: np.ndarray, cfg: np.ndarray, t_m: float, kind: str, args: tuple) -> None:
         """One measurement: P propagated to it, the update(s); a measurement that changed nothing (rejected,
         disturbed) leaves P and the pending propagation as they were (aided.keep_or_undo, as the batch)."""
+        ep = self.epochs
+        if ep is not None:  # the prior of a smoother epoch: P propagated to now, the nominal before the update
+            self._flush_kernel(s, cfg, self.spec, self.P, self.acc)
+            s0, b0 = s.copy(), self.bias.copy()
         P0, acc0 = self.P.copy(), self.acc.copy()
         self._kept = False
         self._measure(s, cfg, t_m, kind, args)
         aided.keep_or_undo(self._kept, self.P, self.acc, P0, acc0)
+        if ep is not None and self._kept:
+            ep.record(sd.state_time(s), P0, self.P, self.acc, smoother.nominal_difference(s0, b0, s, self.bias, cfg))
 
     def _measure(self, s: np.ndarray, cfg: np.ndarray, t_m: float, kind: str, args: tuple) -> None:
         tk = sd.state_time(s)

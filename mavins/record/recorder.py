@@ -38,6 +38,7 @@ FLUSH_ROWS = 512
 TRUTH_MATCH_S = 1e-3  # truth is compared at the nearest truth sample within this much sensor time
 TRAJ_POINTS = 2000
 TRAJ_EVERY_S = 2.0
+SMOOTHED_POINTS = 20000  # rows of the smoothed solution recorded per series (replay --smooth), evenly spaced
 
 COLORS = {
     "x": [230, 60, 60],
@@ -45,6 +46,7 @@ COLORS = {
     "z": [60, 90, 230],
     "estimated": [0, 170, 255],
     "truth": [255, 160, 0],
+    "smoothed": [150, 60, 220],
 }
 XYZ = [COLORS["x"], COLORS["y"], COLORS["z"]]
 
@@ -309,6 +311,32 @@ class Recorder:
             self._send_row("/world/gnss", t, self.rr.Points3D.columns(
                 positions=self._gnss, colors=[[255, 60, 200]] * len(self._gnss),
                 radii=[0.4] * len(self._gnss)).partition([len(self._gnss)]))
+
+    def on_smoothed(self, rows: np.ndarray, origin: tuple[float, float, float]) -> None:
+        """The smoothed solution after the run (``replay --smooth``; kernel rows, aided.ROW_SIZE), beside the
+        forward one: ``/plots/attitude/smoothed``, ``/plots/position/smoothed`` (NED m from the origin),
+        ``/filter/sigma_pos/smoothed`` at most SMOOTHED_POINTS rows of each, and the path in the 3D view
+        (``/world/trajectory/smoothed``, TRAJ_POINTS)."""
+        from ..core.frames import local_ned
+
+        if rows.shape[0] == 0:
+            return
+        rr = self.rr
+        pick = rows[::max(1, -(-rows.shape[0] // SMOOTHED_POINTS))]
+        t = pick[:, 0]
+        ned = np.array([local_ned(float(r[1]), float(r[2]), float(r[3]), origin) for r in pick])
+        for path, names, vals in (
+                ("/plots/attitude/smoothed", ["smoothed roll", "smoothed pitch", "smoothed yaw"], np.degrees(pick[:, 7:10])),
+                ("/plots/position/smoothed", ["smoothed n", "smoothed e", "smoothed d"], ned),
+                ("/filter/sigma_pos/smoothed", ["smoothed sigma_n", "smoothed sigma_e", "smoothed sigma_d"],
+                 pick[:, 14:17])):
+            self.rec.log(path, rr.SeriesLines(names=names), static=True)
+            self.rec.send_columns(path, indexes=[rr.TimeColumn("sensor_time", duration=t)],
+                                  columns=rr.Scalars.columns(scalars=np.ascontiguousarray(vals)))
+            self.rows[path] += len(t)
+        strip = ned[::max(1, -(-ned.shape[0] // TRAJ_POINTS))]
+        self.rec.log("/world/trajectory/smoothed", rr.LineStrips3D([strip], colors=[COLORS["smoothed"]],
+                                                                    radii=_line_radius()), static=True)
 
     def _send_row(self, path: str, t: float, columns: object) -> None:
         """One row of a growing geometry (the whole strip or point set so far) at sensor time t (s),

@@ -236,3 +236,40 @@ def test_replay_of_several_logs_needs_each(tmp_path: Path, capsys: pytest.Captur
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and err[0].startswith("mavins replay: error: ") and say in err[0], err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["afile"] and afile.read_text() == "keep"
+
+
+def test_replay_smooth_writes_the_smoothed_solution_and_records_it_beside_the_forward(
+        live: tuple[Path, Path, str], tmp_path: Path) -> None:
+    """--smooth: the same columns and times as the forward replay (the live run's file), other values (every
+    fix now informs every row), the epoch count on stderr; the Rerun file holds the smoothed attitude,
+    position and sigma series beside the forward ones (one row per solution row, at most 20000) and the
+    smoothed path in the 3D view. The last row, the last epoch's, is the forward one's to the last digit."""
+    from rerun.chunk import RrdReader
+
+    tlog, live_csv, _ = live
+    out, rrd = tmp_path / "smooth.csv", tmp_path / "smooth.rrd"
+    res = mavins("replay", str(tlog), "-o", str(out), "--smooth", "--rerun", str(rrd), *NAV_OPTIONS, cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert "mavins replay: smoothed over " in res.stderr, res.stderr
+    fwd = live_csv.read_text().splitlines()
+    smo = out.read_text().splitlines()
+    assert smo[0] == fwd[0] and len(smo) == len(fwd)
+    f, s = (np.array([[float(x) for x in ln.split(",")] for ln in rows[1:]]) for rows in (fwd, smo))
+    np.testing.assert_array_equal(s[:, 0], f[:, 0])
+    assert np.any(s[:, 1:4] != f[:, 1:4])
+    np.testing.assert_allclose(s[-1], f[-1], rtol=1e-15, atol=0)
+    counts: dict[tuple[str, bool], int] = {}
+    for ch in RrdReader(str(rrd)).stream():
+        counts[(ch.entity_path, ch.is_static)] = counts.get((ch.entity_path, ch.is_static), 0) + ch.num_rows
+    for path in ("/plots/attitude/smoothed", "/plots/position/smoothed", "/filter/sigma_pos/smoothed"):
+        assert counts.get((path, False)) == min(len(smo) - 1, 20000), (path, counts)
+    assert counts.get(("/world/trajectory/smoothed", True)) == 1
+
+
+def test_replay_smooth_needs_the_filter(live: tuple[Path, Path, str], tmp_path: Path) -> None:
+    tlog, _, _ = live
+    res = mavins("replay", str(tlog), "-o", str(tmp_path / "x.csv"), "--smooth", "--aiding", "none", *NAV_OPTIONS,
+                 cwd=tmp_path)
+    assert res.returncode == 2
+    assert res.stderr.strip() == "mavins replay: error: --smooth smooths the aided solution: it cannot go with --aiding none"
+    assert not (tmp_path / "x.csv").exists()
