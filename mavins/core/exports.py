@@ -28,6 +28,10 @@ EXPORTS = (
     Export("runner", "degrees_in_place", f"none({M}, i8[::1])"),
     # mavins nav --smooth: the backward pass and the smoothed rows
     Export("smoother", "backward", f"i8({M}, i8, i8)"),
+    # mavins replay --smooth: the live filter's epochs
+    Export("smoother", "reset_transition", f"none({V})"),
+    Export("smoother", "record", f"i8({M}, i8, f8, i8, {M}, {M}, {V}, {V}, i8[::1])"),
+    Export("smoother", "nominal_difference", f"{V}({V}, {V}, {V}, {V}, {V})"),
     Export("aided", "smooth_rows", f"none({M}, i8, i8[::1], {M}, i8, i8[::1])"),
     Export("strapdown", "init_state", f"{V}(f8, f8, f8, f8, {V}, f8, f8, f8)"),
     Export("aided", "push_rate_aided",

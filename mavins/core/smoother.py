@@ -39,9 +39,8 @@ from .strapdown import GEOGRAPHIC
 EP_T, EP_ROW, EP_DX = 0, 1, 2  # store columns: epoch time (s), its output row, then the slots of store_slots
 
 
-@kernel
 def store_width(na: int) -> int:
-    """Values per epoch of a store over ``na`` active states (module docstring)."""
+    """Values per epoch of a store over ``na`` active states (module docstring; Python's, for allocating)."""
     return 2 + 2 * na + 3 * na * na
 
 

@@ -97,11 +97,12 @@ def test_the_module_name_follows_every_byte_of_the_source(tmp_path: Path) -> Non
 
 
 def test_mavins_nav_on_an_empty_cache_compiles_nothing_and_writes_the_jits_bytes(tmp_path: Path) -> None:
-    """The batch strapdown run and the batch filter (``--gnss``, ``--baro``), built ahead of time."""
+    """The batch strapdown run and the batch filter (``--gnss``, ``--baro``; smoothed: the forward pass is the
+    same kernel with an epoch store, and the backward pass and the rows are built too), ahead of time."""
     res = mavins("sim", "flight", "-o", "d", "--duration", "30", "--grade", "consumer", cwd=tmp_path)
     assert res.returncode == 0, res.stderr
     cache = tmp_path / "numba-cache"
-    for aiding in ((), ("--gnss", "d/gnss.csv", "--baro", "d/baro.csv")):
+    for aiding in ((), ("--gnss", "d/gnss.csv", "--baro", "d/baro.csv", "--smooth")):
         outputs = {}
         for flag, env in (("1", {"NUMBA_CACHE_DIR": str(cache)}), ("0", {})):
             out = tmp_path / f"nav{flag}.csv"
