@@ -945,3 +945,28 @@ def test_mag_stats_start_empty_with_the_hard_iron_variance() -> None:
     P = np.diag(np.arange(1.0, em.NX + 1.0))
     incl = aided.mag_stats(P)
     assert incl.shape == (kf.MAG_STATS,) and not incl[:4].any() and incl[4] == P[em.X_MB, em.X_MB] == em.X_MB + 1.0
+
+
+def test_smoothing_a_constant_position_gives_every_row_the_final_estimate() -> None:
+    """At rest without process noise (an ideal IMU, no velocity or attitude uncertainty) the position error is
+    a constant seen by the prior (0 m, sigma 2 m) and two fixes (3 m then 6 m north, 1.5 then -3 m east,
+    sigma 2 m): given all three, the north error at every time is their mean, 3 m, east -0.5 m, with variance
+    4/3 (the information sum). The forward rows step from 0 to 1.5 to 3 m north, sigma 2, sqrt 2, sqrt(4/3);
+    the smoothed rows are 3 m and sqrt(4/3) throughout. Epochs: the first row and the two fixes'."""
+    m_n, m_e = RN + H0, (RE + H0) * math.cos(math.radians(LAT0))
+    gnss = [[0.03, LAT0 + math.degrees(3.0 / m_n), LON0 + math.degrees(1.5 / m_e), H0, NAN, NAN, NAN, 2.0, 2.0, 0.3],
+            [0.07, LAT0 + math.degrees(6.0 / m_n), LON0 + math.degrees(-3.0 / m_e), H0, NAN, NAN, NAN, 2.0, 2.0, 0.3]]
+    fwd, _ = nav(gnss=gnss, init=init(sigma_pos=2.0), file_units=False)
+    smo, st = nav(gnss=gnss, init=init(sigma_pos=2.0), file_units=False, smooth=True)
+    north = lambda rows: (rows[:, 1] - math.radians(LAT0)) * m_n  # noqa: E731
+    east = lambda rows: (rows[:, 2] - math.radians(LON0)) * m_e  # noqa: E731
+    np.testing.assert_allclose(north(fwd), [0.0] * 2 + [1.5] * 4 + [3.0] * 4, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(north(smo), 3.0, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(east(smo), -0.5, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(smo[:, col("sigma_n")], math.sqrt(4.0 / 3.0), rtol=1e-12, atol=0)
+    np.testing.assert_allclose(smo[:, col("sigma_e")], math.sqrt(4.0 / 3.0), rtol=1e-12, atol=0)
+    np.testing.assert_allclose(fwd[:, col("sigma_n")], [2.0] * 2 + [math.sqrt(2.0)] * 4 + [math.sqrt(4 / 3)] * 4,
+                               rtol=1e-12, atol=0)
+    assert st["epochs"] == 3 and st["singular"] == 0
+    np.testing.assert_array_equal(smo[-1], fwd[-1])
+    np.testing.assert_array_equal(smo[:, 4:14], fwd[:, 4:14])  # nothing else moves: velocity, attitude

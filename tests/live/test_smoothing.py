@@ -36,6 +36,9 @@ def horizontal_errors(rows: np.ndarray, truth: np.ndarray) -> np.ndarray:
                             (rows[:, 2] - np.radians(truth[k, 2])) * (r_e + h) * np.cos(lat)])
 
 
+pytestmark = pytest.mark.plain_python_slow  # the car through the engine: minutes as plain Python (mutation runs)
+
+
 @pytest.fixture(scope="module")
 def drive():  # type: ignore[no-untyped-def]
     run = generate(load("car"), rate=100.0, grade="industrial", seed=11)
