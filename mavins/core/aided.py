@@ -361,19 +361,29 @@ def filter_row(P: np.ndarray, bias: np.ndarray, out: np.ndarray) -> None:
 @kernel
 def filter_estimates(bias: np.ndarray, out: np.ndarray, scale: float, keep: float) -> None:
     """The estimate columns of a row (filter_row's layout) from a bias vector (kalman.B_* layout):
-    ``out = keep out + scale estimate`` (1, 0 writes them; -1, 1 subtracts a correction's)."""
+    ``out = keep out + scale estimate`` (1, 0 writes them, whatever ``out`` held, NaN included; -1, 1
+    subtracts a correction's)."""
     k = OUT_SIZE
     if out.shape[0] >= ROW_SIZE:
         for b in range(len(_STATE_BLOCK_X)):
             x0, n = _STATE_BLOCK_X[b], _STATE_BLOCK_N[b]
             for i in range(n):
-                out[k + i] = keep * out[k + i] + scale * bias[x0 - em.X_SENSORS + i]
+                _blend(out, k + i, bias[x0 - em.X_SENSORS + i], scale, keep)
             k += 2 * n
     g = kf.gyro_bias_total(bias)
     a = kf.accel_bias_total(bias)
     for i in range(3):
-        out[23 + i] = keep * out[23 + i] + scale * g[i]
-        out[26 + i] = keep * out[26 + i] + scale * a[i]
+        _blend(out, 23 + i, g[i], scale, keep)
+        _blend(out, 26 + i, a[i], scale, keep)
+
+
+@kernel
+def _blend(out: np.ndarray, c: int, value: float, scale: float, keep: float) -> None:
+    """``out[c] = keep out[c] + scale value``; with keep 0 the old value is not read (it may be NaN)."""
+    if keep == 0.0:
+        out[c] = scale * value
+    else:
+        out[c] = keep * out[c] + scale * value
 
 
 @kernel

@@ -258,3 +258,11 @@ def test_a_row_written_before_its_epochs_measurements_takes_the_prior_error() ->
     r_n = earth.radii(lat)[0]
     assert out[0, 1] == pytest.approx(lat - 4.0 / r_n, abs=1e-15) and out[0, 14] == pytest.approx(4.0)
     assert out[1, 1] == lat and out[1, 14] == 0.0  # at the last epoch: the forward row
+
+
+def test_filter_row_writes_over_whatever_the_row_held() -> None:
+    """A row full of NaN (np.empty may hand out any bytes) gets every filter column written: none stays NaN."""
+    out = np.full(aided.ROW_SIZE, np.nan)
+    out[:14] = 0.0
+    aided.filter_row(np.eye(NX), np.zeros(kalman.B_SIZE), out)
+    assert np.isfinite(out).all()
