@@ -129,6 +129,8 @@ BARO_REQUIRED = ("t", "h")
 BARO_OPTIONAL = ("sigma",)
 MAG_REQUIRED = ("t", "mx", "my", "mz")
 MAG_OPTIONAL = ("sigma",)
+WHEEL_REQUIRED = ("t", "speed")
+WHEEL_OPTIONAL = ("sigma",)
 
 
 MAG_UNITS = {"gauss": 1e-5, "mgauss": 1e-2, "uT": 1e-3, "nT": 1.0}  # per nT, the magnetic model's unit
@@ -152,6 +154,11 @@ class AidingFiles:
     mag_unit: str | None = None  # the magnetometer file's unit (MAG_UNITS), None: not known
     misalignment: bool = False  # estimate the grade's (or the spec's) gyro and accelerometer misalignments
     smooth: bool = False  # write the fixed-interval smoothed solution instead of the forward filter's
+    wheel: Path | None = None  # a wheel odometer's forward speed: t,speed [,sigma] (m/s)
+    wheel_lever_arm: tuple[float, float, float] = (0.0, 0.0, 0.0)  # m, body FRD: the odometer's axle centre
+    wheel_scale: float | None = None  # its scale factor's initial 1-sigma (dimensionless; None: aided's default)
+    wheel_sigma: float | None = None  # m/s: the speed noise of rows without a sigma (None: aided's default)
+    nhc: float = 0.0  # m/s: the non-holonomic constraint's sigma; 0: not applied
 
     def field_at(self, lat_deg: float, lon_deg: float, h_m: float) -> dict[str, float | None]:
         """navigate_aided's magnetic keywords at the initial position: the declination (deg), the given one
@@ -295,6 +302,13 @@ def run_nav_aided(imu_path: Path, init_path: Path, out_path: Path, opts: NavOpti
     gnss = read_aiding(aiding.gnss, GNSS_REQUIRED, GNSS_OPTIONAL, no_fix_rows=True) if aiding.gnss is not None else None
     baro = read_aiding(aiding.baro, BARO_REQUIRED, BARO_OPTIONAL) if aiding.baro is not None else None
     mag = read_aiding(aiding.mag, MAG_REQUIRED, MAG_OPTIONAL) if aiding.mag is not None else None
+    wheel = read_aiding(aiding.wheel, WHEEL_REQUIRED, WHEEL_OPTIONAL) if aiding.wheel is not None else None
+    if wheel is not None and aiding.wheel_sigma is not None:
+        wheel[~np.isfinite(wheel[:, 2]), 2] = aiding.wheel_sigma
+    if wheel is not None and np.any(wheel[:, 2] <= 0.0):
+        row = int(np.argmax(wheel[:, 2] <= 0.0))
+        raise files.DataFileError(f"{aiding.wheel}: line {row + 2}, column 'sigma': must be positive (m/s), got "
+                                  f"{float(wheel[row, 2])!r}")
     for kind, table in (("gnss", gnss), ("baro", baro), ("mag", mag)):  # --KIND-delay: measured at t - delay
         if table is not None and aiding.delays.get(kind, 0.0):
             table[:, 0] -= aiding.delays[kind]
@@ -311,6 +325,8 @@ def run_nav_aided(imu_path: Path, init_path: Path, out_path: Path, opts: NavOpti
             imu, init_keys, gnss, baro, mag=mag, static=static, spec=spec, lever_arm=lever_arm, gate=gate,
             mag_bias=aiding.mag_bias, **field,
             scale_factors=aiding.scale_factors, misalignment=aiding.misalignment, smooth=aiding.smooth,
+            wheel=wheel, wheel_lever_arm=aiding.wheel_lever_arm, nhc=aiding.nhc,
+            **({} if aiding.wheel_scale is None else {"wheel_scale": aiding.wheel_scale}),
             **{k: v for k, v in opts.strapdown.keywords().items() if k != "imu_rates"})
     except ValueError as exc:
         raise files.DataFileError(str(exc)) from None

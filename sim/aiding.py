@@ -38,8 +38,9 @@ if TYPE_CHECKING:
 GNSS_COLUMNS = ("t", "lat", "lon", "h", "vn", "ve", "vd", "sigma_h", "sigma_v", "sigma_vel")
 BARO_COLUMNS = ("t", "h", "sigma")
 MAG_COLUMNS = ("t", "mx", "my", "mz", "sigma")
+WHEEL_COLUMNS = ("t", "speed", "sigma")
 
-_STREAMS = {"gnss": 0x6E1, "baro": 0x6E2, "mag": 0x6E3}
+_STREAMS = {"gnss": 0x6E1, "baro": 0x6E2, "mag": 0x6E3, "wheel": 0x6E4}
 
 
 @dataclass(frozen=True)
@@ -114,16 +115,28 @@ class MagConfig:
 
 
 @dataclass(frozen=True)
+class WheelConfig:
+    """A wheel odometer: the forward speed (m/s) at the axle centre ``lever_arm`` (m, body FRD, from the IMU),
+    times ``1 + scale`` (its scale-factor error), plus white noise ``sigma`` (m/s), ``rate`` samples a second."""
+
+    rate: float = 10.0
+    sigma: float = 0.05
+    scale: float = 0.01
+    lever_arm: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
 class Aiding:
     """Aiding rows of one run in file units (None = not generated)."""
 
     gnss: np.ndarray | None = None
     baro: np.ndarray | None = None
     mag: np.ndarray | None = None
+    wheel: np.ndarray | None = None
 
     def write(self, outdir: Path) -> list[Path]:
-        """Write gnss.csv, baro.csv, mag.csv (those present) into outdir."""
-        return write_aiding(outdir, gnss=self.gnss, baro=self.baro, mag=self.mag)
+        """Write gnss.csv, baro.csv, mag.csv, wheel.csv (those present) into outdir."""
+        return write_aiding(outdir, gnss=self.gnss, baro=self.baro, mag=self.mag, wheel=self.wheel)
 
 
 def _rng(run: "SimRun", stream: str) -> np.random.Generator:
@@ -232,6 +245,24 @@ def magnetometer(run: "SimRun", config: MagConfig = MagConfig()) -> np.ndarray:
     return rows
 
 
+def wheel(run: "SimRun", config: WheelConfig = WheelConfig()) -> np.ndarray:
+    """Odometer rows ``t, speed, sigma`` (m/s): ``(1 + scale) ((C_b^n)^T v + w_ib x l)_x + noise``, the forward
+    speed over ground at the axle centre l (kalman.wheel_speed's model; the Earth rate's share through the
+    lever arm, below 1e-4 m/s per metre, left out as there)."""
+    t = _epochs(run, config.rate)
+    _, vel, q, w = truth_at(run, t)
+    rng = _rng(run, "wheel")
+    lever = np.asarray(config.lever_arm, dtype=np.float64)
+    rows = np.empty((t.size, 3))
+    rows[:, 0] = t
+    rows[:, 2] = config.sigma
+    for k in range(t.size):
+        u = (quat_to_dcm(q[k]).T @ vel[k])[0] + np.cross(w[k], lever)[0]
+        rows[k, 1] = (1.0 + config.scale) * u
+    rows[:, 1] += config.sigma * rng.standard_normal(t.size)
+    return rows
+
+
 def body_field(q: np.ndarray, config: MagConfig, noise: np.ndarray, t: float = math.nan) -> np.ndarray:
     """One magnetometer sample (uT, FRD) at time t (s) of an IMU with attitude quaternion ``q`` (C_b^n,
     scalar first): ``C_n^b (m^n + disturbances at t) + hard iron + noise`` (noise in uT, already drawn)."""
@@ -264,12 +295,14 @@ def simulate_aiding(
     gnss_config: GnssConfig | None = GnssConfig(),
     baro_config: BaroConfig | None = BaroConfig(),
     mag_config: MagConfig | None = None,
+    wheel_config: WheelConfig | None = None,
 ) -> Aiding:
-    """GNSS, baro and magnetometer rows for a run (None config = that sensor is absent)."""
+    """GNSS, baro, magnetometer and odometer rows for a run (None config = that sensor is absent)."""
     return Aiding(
         gnss=None if gnss_config is None else gnss(run, gnss_config),
         baro=None if baro_config is None else baro(run, baro_config),
         mag=None if mag_config is None else _with_sigma(magnetometer(run, mag_config), mag_config),
+        wheel=None if wheel_config is None else wheel(run, wheel_config),
     )
 
 
@@ -291,13 +324,15 @@ def _write_csv(path: Path, columns: Sequence[str], rows: np.ndarray) -> None:
 
 
 def write_aiding(
-    outdir: Path, *, gnss: np.ndarray | None = None, baro: np.ndarray | None = None, mag: np.ndarray | None = None
+    outdir: Path, *, gnss: np.ndarray | None = None, baro: np.ndarray | None = None, mag: np.ndarray | None = None,
+    wheel: np.ndarray | None = None
 ) -> list[Path]:
-    """Write gnss.csv, baro.csv and mag.csv (those given) into outdir; returns the paths."""
+    """Write gnss.csv, baro.csv, mag.csv and wheel.csv (those given) into outdir; returns the paths."""
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     paths = []
-    for name, columns, rows in (("gnss", GNSS_COLUMNS, gnss), ("baro", BARO_COLUMNS, baro), ("mag", MAG_COLUMNS, mag)):
+    for name, columns, rows in (("gnss", GNSS_COLUMNS, gnss), ("baro", BARO_COLUMNS, baro), ("mag", MAG_COLUMNS, mag),
+                                ("wheel", WHEEL_COLUMNS, wheel)):
         if rows is not None:
             path = outdir / f"{name}.csv"
             _write_csv(path, columns, rows)

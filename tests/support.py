@@ -81,8 +81,9 @@ def summary(log: str) -> dict[str, str]:
 
 
 # -- typed WGS-84 (NIMA TR8350.2, docs/conventions.md) and C_b^n: the tests' truth, never imported from mavins --
-# aided.run_aided's last three arguments when nothing is smoothed: an empty epoch store, no active states, 1 s
-NO_SMOOTHING = (np.empty((0, 2)), np.empty(0, dtype=np.int64), 1.0)
+# aided.run_aided's last arguments when nothing is smoothed and no wheel aids: an empty epoch store, no active
+# states, 1 s; no odometer rows, its lever arm, no constraint
+NO_SMOOTHING = (np.empty((0, 2)), np.empty(0, dtype=np.int64), 1.0, np.empty((0, 3)), np.zeros(3), 0.0)
 
 A = 6378137.0
 F = 1 / 298.257223563

@@ -42,6 +42,12 @@ def _add_nav(sub: argparse._SubParsersAction) -> None:
                    help="MAG.csv's unit (mavins sim writes uT): the magnetic model's strength then checks the "
                         "samples and sets the hard iron's model (--mag-bias); default: any unit, not checked")
     _magnetic_options(g, "today's")
+    g.add_argument("--wheel", type=Path, metavar="WHEEL.csv",
+                   help="a wheel odometer's forward speed at the axle centre (--wheel-lever-arm): t,speed [,sigma] "
+                        "(m/s); its scale factor is estimated (docs/filter.md)")
+    g.add_argument("--nhc", action="store_true",
+                   help="a wheeled vehicle: the non-holonomic constraint (no sideways and no vertical body velocity) "
+                        "every 0.1 s")
     g.add_argument("--rest", type=_Outage(), action="append", metavar="START,END",
                    help="the vehicle stood still over this interval of sensor time (s): a zero-velocity update at "
                         "every attitude update inside it and a zero-rate update (the gyro bias) at its end; "
@@ -75,20 +81,26 @@ def _cmd_nav(args: argparse.Namespace) -> int:
     try:
         if len(args.imu) > 1 or args.fdi_log is not None:
             return _cmd_nav_fdi(args, opts)
-        if args.gnss is None and args.baro is None and args.mag is None and args.rest is None:
+        if args.gnss is None and args.baro is None and args.mag is None and args.rest is None \
+                and args.wheel is None and not args.nhc:
             if args.smooth:
-                print("mavins nav: error: --smooth smooths the aided solution: give --gnss, --baro, --mag or --rest",
+                print("mavins nav: error: --smooth smooths the aided solution: give --gnss, --baro, --mag, --rest, "
+                      "--wheel or --nhc",
                       file=sys.stderr)
                 return EXIT_USAGE
             rows = run_nav(args.imu[0], args.init, args.output, opts)
         else:
+            from ..core.aided import DEFAULT_SIGMA_NHC
             from ..nav import AidingFiles, run_nav_aided
 
             rows, counts = run_nav_aided(args.imu[0], args.init, args.output, opts,
                                          AidingFiles(args.gnss, args.baro, args.mag, args.declination,
                                                      tuple(args.rest or ()), args.date, _delays(args),
                                                      args.mag_bias, args.scale_factors, args.mag_unit,
-                                                     args.misalignment, args.smooth),
+                                                     args.misalignment, args.smooth, args.wheel,
+                                                     tuple(args.wheel_lever_arm),
+                                                     None if args.wheel_scale is None else args.wheel_scale / 100.0,
+                                                     args.wheel_sigma, DEFAULT_SIGMA_NHC if args.nhc else 0.0),
                                          _imu_spec(args), args.lever_arm, args.gate)
             for kind, (ok, bad) in counts.items():
                 if ok or bad:
@@ -107,7 +119,8 @@ def _cmd_nav_each(args: argparse.Namespace, opts: object) -> int:
     from ..nav import run_nav_batch
 
     bad = [name for name, v in (("--gnss", args.gnss), ("--baro", args.baro), ("--mag", args.mag),
-                                ("--rest", args.rest), ("--fdi-log", args.fdi_log),
+                                ("--rest", args.rest), ("--fdi-log", args.fdi_log), ("--wheel", args.wheel),
+                                ("--nhc", args.nhc or None),
                                 ("--smooth", args.smooth or None)) if v is not None]
     if bad:
         print(f"mavins nav: error: --each navigates free inertial; {', '.join(bad)} cannot go with it",

@@ -62,6 +62,9 @@ def _add_sim(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--mag-rate", type=_real(0.0, 100.0), default=0.0, metavar="HZ",
                    help="magnetometer samples per second written to mag.csv, or streamed in HIGHRES_IMU (0 = none; "
                         "the World Magnetic Model's field at the start on --date, 0.3 uT noise; docs/simulator.md)")
+    p.add_argument("--wheel-rate", type=_real(0.0, 100.0), metavar="HZ",
+                   help="wheel odometer speeds per second written to wheel.csv (t,speed,sigma: the forward speed with a "
+                        "1 %% scale-factor error and 0.05 m/s noise; 0 = none; default 10 for the car scenario, else 0)")
     p.add_argument("--date", type=_Date(), default=None, metavar="YYYY-MM-DD",
                    help="the date of the simulated magnetic field (or a decimal year); default: today's")
     p.add_argument("--mag-hard-iron", type=_Vec3(), default="0,0,0", metavar="X,Y,Z",
@@ -102,14 +105,16 @@ def _cmd_sim(args: argparse.Namespace) -> int:
             run = generate(scenario, duration=args.duration, rate=args.rate, seed=args.seed, grade=args.grade,
                            imus=args.imus)
         if args.output is not None:
-            from sim.aiding import BaroConfig, GnssConfig, MagConfig, simulate_aiding
+            from sim.aiding import BaroConfig, GnssConfig, MagConfig, WheelConfig, simulate_aiding
 
             outages = (tuple(args.gnss_outage),) if args.gnss_outage else ()
             gnss_on = args.gnss_rate > 0
+            wheel_rate = args.wheel_rate if args.wheel_rate is not None else (10.0 if scenario.name == "car" else 0.0)
             aiding = simulate_aiding(run, GnssConfig(rate=args.gnss_rate, outages=outages) if gnss_on else None,
                                      BaroConfig() if gnss_on else None,
-                                     _sim_mag(MagConfig, run, args) if args.mag_rate > 0 else None) \
-                if gnss_on or args.mag_rate > 0 else None
+                                     _sim_mag(MagConfig, run, args) if args.mag_rate > 0 else None,
+                                     WheelConfig(rate=wheel_rate) if wheel_rate > 0 else None) \
+                if gnss_on or args.mag_rate > 0 or wheel_rate > 0 else None
             paths = write(run, args.output, aiding)
     except (ValueError, OSError) as exc:  # ScenarioError, DataFileError and ResourceError are ValueErrors
         text = f"{exc.filename}: {exc.strerror}" if isinstance(exc, OSError) and exc.filename else str(exc)

@@ -178,7 +178,7 @@ def _filter_options(g: argparse._ArgumentGroup, with_aiding: bool = True) -> Non
     """The error-state filter's options (docs/conventions.md "Aided navigation")."""
     if with_aiding:
         g.add_argument("--aiding", type=_Aiding(), default="gnss,baro,mag", metavar="KINDS",
-                       help="comma list of gnss,baro,mag,zupt,nhc to use from the stream (nhc: the non-holonomic constraint of a wheeled vehicle), or none (free inertial)")
+                       help="comma list of gnss,baro,mag,zupt,nhc,wheel to use from the stream (nhc: the non-holonomic constraint of a wheeled vehicle; wheel: WHEEL_DISTANCE odometry), or none (free inertial)")
     g.add_argument("--grade", choices=GRADES, default="consumer",
                    help="the filter's IMU error model: the simulator's grade figures")
     g.add_argument("--imu-spec", type=Path, metavar="SPEC.toml",
@@ -198,6 +198,14 @@ def _filter_options(g: argparse._ArgumentGroup, with_aiding: bool = True) -> Non
                    help="estimate the magnetometer's hard iron (body FRD) from this initial 1-sigma per axis: gauss "
                         "for run/replay (as MAVLink carries the field), MAG.csv's unit for nav (default 0: the samples "
                         "are calibrated, as autopilots send them)")
+    g.add_argument("--wheel-lever-arm", type=_Vec3(), default="0,0,0", metavar="X,Y,Z",
+                   help="wheel odometry (WHEEL_DISTANCE, nav's --wheel): the axle centre from the IMU, body frame FRD (m)")
+    g.add_argument("--wheel-scale", type=_real(0.0, 100.0), metavar="PCT",
+                   help="initial 1-sigma of the odometer's scale-factor error (%%), estimated and written as the ws "
+                        "column (ppm) (default: the filter's, docs/filter.md)")
+    g.add_argument("--wheel-sigma", type=_real(0.0, 100.0, above=True), metavar="M/S",
+                   help="1-sigma of one odometer speed (m/s) (default: the filter's, docs/filter.md; nav: for rows "
+                        "without a sigma)")
     for kind, what in DELAYED:
         g.add_argument(f"--{kind}-delay", type=_real(0.0, 1000.0), default=0.0, metavar="MS",
                        help=f"the {what} stamped t was measured MS ms earlier, at t - MS/1000, and is fused at that "
@@ -500,7 +508,10 @@ def _engine_config(args: argparse.Namespace):  # type: ignore[no-untyped-def]
 
     flt = FilterSettings(spec=_imu_spec(args), aiding=args.aiding, gate=args.gate, lever_arm=args.lever_arm,
                          delays=_delays(args), sigma_mag_bias=args.mag_bias, scale_factors=args.scale_factors,
-                         misalignment=args.misalignment, smooth=getattr(args, "smooth", False))
+                         misalignment=args.misalignment, smooth=getattr(args, "smooth", False),
+                         wheel_lever_arm=tuple(args.wheel_lever_arm),
+                         **({} if args.wheel_scale is None else {"wheel_scale": args.wheel_scale / 100.0}),
+                         **({} if args.wheel_sigma is None else {"sigma_wheel": args.wheel_sigma}))
     from ..core.settings import strapdown_from_options
 
     strapdown = strapdown_from_options(args)

@@ -76,12 +76,15 @@ K_MAG = 3
 K_ZUPT = 4
 K_ZARU = 5
 K_MAG_DISTURBED = 6
-KIND_NAMES = ("gnss_pos", "gnss_vel", "baro", "mag", "zupt", "zaru", "mag_disturbed")
+K_WHEEL = 7
+K_NHC = 8
+KIND_NAMES = ("gnss_pos", "gnss_vel", "baro", "mag", "zupt", "zaru", "mag_disturbed", "wheel", "nhc")
 
 GNSS_COLUMNS = ("t", "lat", "lon", "h", "vn", "ve", "vd", "sigma_h", "sigma_v", "sigma_vel")
 BARO_COLUMNS = ("t", "h", "sigma")
 MAG_COLUMNS = ("t", "mx", "my", "mz", "sigma")
 STATIC_COLUMNS = ("t0", "t1", "sigma_v", "sigma_w")
+WHEEL_COLUMNS = ("t", "speed", "sigma")
 LOG_COLUMNS = ("t", "kind", "nis", "dof", "accepted", "ratio")
 
 FILTER_COLUMNS = (
@@ -96,9 +99,17 @@ FILTER_COLUMNS = (
 FILTER_GROUPS = ("sigma_pos", "sigma_vel", "sigma_att", "bg", "ba", "sigma_bg", "sigma_ba")  # FILTER_COLUMNS by 3
 OUT_COLUMNS = sd.OUT_COLUMNS + FILTER_COLUMNS
 OUT_SIZE = len(OUT_COLUMNS)  # 35: the contract's 14 solution and 21 filter columns
-STATE_BLOCKS = ("SG", "SA", "MG", "MA", "MB")  # errmodel.STATE blocks after the contract's columns, where estimated
+STATE_BLOCKS = ("SG", "SA", "MG", "MA", "MB", "WS")  # errmodel.STATE blocks after the contract's columns, where estimated
 _BLOCK = {b.name: b for b in em.STATE}
-STATE_COLUMNS = tuple(f"{p}{b.lower()}_{a}" for b in STATE_BLOCKS for p in ("", "sigma_") for a in _BLOCK[b].labels)
+
+
+def block_columns(block: str, prefix: str = "") -> tuple[str, ...]:
+    """The column names of an error-state block's estimate (``prefix`` ""; ``sigma_`` its 1-sigma): the block's
+    name in lower case and each element's label, ``sg_x`` ... ; a single value has the name alone (``ws``)."""
+    return tuple(f"{prefix}{block.lower()}_{a}" if a else f"{prefix}{block.lower()}" for a in _BLOCK[block].labels)
+
+
+STATE_COLUMNS = tuple(c for b in STATE_BLOCKS for p in ("", "sigma_") for c in block_columns(b, p))
 ROW_COLUMNS = OUT_COLUMNS + STATE_COLUMNS
 ROW_SIZE = len(ROW_COLUMNS)
 _STATE_BLOCK_X = tuple(em.OFFSET[b] for b in STATE_BLOCKS)  # their first indices in the error state
@@ -109,6 +120,10 @@ MAG_RESET_AFTER = 50  # consecutive rejected magnetometer samples after which th
 MAG_STRENGTH_GATE = 0.2  # gauss: likewise for its strength (PX4 EKF2_MAG_CHK_STR), in the sample's unit where it is known
 
 SMOOTH_DT = 1.0  # s: the smoother's epochs between measurements are at most this far apart (navigate_aided)
+NHC_EVERY = 0.1  # s: the non-holonomic constraint's interval (the live path's: engine, FilterSettings)
+DEFAULT_SIGMA_WHEEL = 0.05  # m/s: a wheel odometer's speed noise (docs/filter.md)
+DEFAULT_WHEEL_SCALE = 0.02  # its scale factor's initial 1-sigma (2 %)
+DEFAULT_SIGMA_NHC = 0.1  # m/s: the constraint's sideways and vertical body velocity
 DEFAULT_SIGMA_H = 2.5  # m (docs/conventions.md GNSS file)
 DEFAULT_SIGMA_V = 5.0  # m
 DEFAULT_SIGMA_VEL = 0.3  # m/s
@@ -438,6 +453,9 @@ def run_aided(
     store: np.ndarray,
     active: np.ndarray,
     smooth_dt: float,
+    wheel: np.ndarray,
+    wheel_lever: np.ndarray,
+    nhc_sigma: float,
 ) -> tuple[int, int, int]:
     """Batch aided navigation over increment rows; returns (output rows, NIS log rows, smoother epochs).
 
@@ -462,6 +480,11 @@ def run_aided(
     completed first, so that P^- is the prior at that time) and, between them,
     a row at least every ``smooth_dt`` s where P was just propagated. An
     empty store records nothing and leaves the filter as without it.
+
+    ``wheel`` rows ``t, speed (m/s), sigma (m/s)``: the odometer's forward
+    speed at the axle centre ``wheel_lever`` (m, body FRD; kalman.wheel_speed).
+    ``nhc_sigma`` > 0: the non-holonomic constraint (kalman.nhc, that sigma in
+    m/s) at the first update every NHC_EVERY s.
     """
     if out.shape[1] < ROW_SIZE or counts.shape[0] < len(KIND_NAMES) or (log.shape[0] > 0 and log.shape[1] < 6) \
             or P.shape[0] != NX or P.shape[1] != NX or bias.shape[0] != kf.B_SIZE:
@@ -481,6 +504,10 @@ def run_aided(
     iz = 0
     while iz < static.shape[0] and static[iz, 1] < t_start:
         iz += 1
+    iw = 0
+    while iw < wheel.shape[0] and (wheel[iw, 0] < t_start or (cont and wheel[iw, 0] == t_start)):
+        iw += 1
+    t_nhc = -np.inf
     gm_g = spec[em.SP_GYRO_GM] > 0.0
     smoothing = store.shape[0] > 0
     acc = np.zeros(ACC_SIZE + NX * NX if smoothing else ACC_SIZE)
@@ -526,7 +553,8 @@ def run_aided(
         epoch = False
         if smoothing:
             due = (ig < gnss.shape[0] and gnss[ig, 0] <= tk) or (ib < baro.shape[0] and baro[ib, 0] <= tk) \
-                or (im < mag.shape[0] and mag[im, 0] <= tk) or (iz < static.shape[0] and static[iz, 0] <= tk)
+                or (im < mag.shape[0] and mag[im, 0] <= tk) or (iz < static.shape[0] and static[iz, 0] <= tk) \
+                or (iw < wheel.shape[0] and wheel[iw, 0] <= tk) or (nhc_sigma > 0.0 and tk - t_nhc >= NHC_EVERY)
             epoch = due or n_out == 0 or (acc[12] == 0.0 and tk - t_ep >= smooth_dt)
             if epoch:
                 _propagate(s, cfg, spec, P, acc, GEOGRAPHIC)  # P^- at tk: nothing pending
@@ -576,6 +604,25 @@ def run_aided(
                 kept = status >= 1
             keep_or_undo(kept, P, acc, P0, acc0)
             im += 1
+        while iw < wheel.shape[0] and wheel[iw, 0] <= tk:
+            P0, acc0, kept = P.copy(), acc.copy(), False
+            _propagate(s, cfg, spec, P, acc, GEOGRAPHIC)
+            if np.isfinite(wheel[iw, 1]):
+                nu, H, R = kf.wheel_speed(s, bias, wheel[iw, 1], w_ib, wheel_lever, tk - wheel[iw, 0], T,
+                                          wheel[iw, 2])
+                nis, ratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate, kf.ALL)
+                n_log = _record(log, n_log, counts, wheel[iw, 0], K_WHEEL, 1, nis, ratio, ok)
+                kept = ok
+            keep_or_undo(kept, P, acc, P0, acc0)
+            iw += 1
+        if nhc_sigma > 0.0 and tk - t_nhc >= NHC_EVERY:
+            P0, acc0 = P.copy(), acc.copy()
+            _propagate(s, cfg, spec, P, acc, GEOGRAPHIC)
+            nu, H, R = kf.nhc(s, nhc_sigma)
+            nis, ratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate, kf.ALL)
+            n_log = _record(log, n_log, counts, tk, K_NHC, 2, nis, ratio, ok)
+            keep_or_undo(ok, P, acc, P0, acc0)
+            t_nhc = tk
         while iz < static.shape[0] and static[iz, 0] <= tk:
             if tk <= static[iz, 1]:
                 P0, acc0 = P.copy(), acc.copy()
@@ -681,8 +728,9 @@ def _columns(rows: Any, width: int, defaults: Sequence[float], name: str) -> np.
 
 def unit_factors(columns: Sequence[str]) -> np.ndarray:
     """Per column of a solution row, the factor from kernel to file units: degrees for lat, lon, the Euler
-    angles and sigma_att; deg/h for the gyro bias and its sigma; ppm for the scale factors, arcsec for the
-    misalignments (the spec keys' units) and their sigma; 1 for everything else."""
+    angles and sigma_att; deg/h for the gyro bias and its sigma; ppm for the scale factors (the wheel
+    odometer's too), arcsec for the misalignments (the spec keys' units) and their sigma; 1 for everything
+    else."""
     deg = math.degrees(1.0)
     by_name = {n: deg for n in ("lat", "lon", "roll", "pitch", "yaw", "sigma_att_n", "sigma_att_e", "sigma_att_d")}
     for a in "xyz":
@@ -690,8 +738,10 @@ def unit_factors(columns: Sequence[str]) -> np.ndarray:
         for blk in ("sg", "sa"):
             by_name[f"{blk}_{a}"] = by_name[f"sigma_{blk}_{a}"] = 1e6
     for blk in ("MG", "MA"):
-        for a in _BLOCK[blk].labels:
-            by_name[f"{blk.lower()}_{a}"] = by_name[f"sigma_{blk.lower()}_{a}"] = 1.0 / em.ARCSEC
+        for c in block_columns(blk) + block_columns(blk, "sigma_"):
+            by_name[c] = 1.0 / em.ARCSEC
+    for c in block_columns("WS") + block_columns("WS", "sigma_"):
+        by_name[c] = 1e6
     return np.array([by_name.get(n, 1.0) for n in columns])
 
 
@@ -711,16 +761,18 @@ def column_groups(columns: Sequence[str]) -> tuple[tuple[str, tuple[str, ...], t
     groups = [(g, FILTER_COLUMNS[3 * k:3 * k + 3]) for k, g in enumerate(FILTER_GROUPS)]
     for b in STATE_BLOCKS:
         for p in ("", "sigma_"):
-            groups.append((f"{p}{b.lower()}", tuple(f"{p}{b.lower()}_{a}" for a in _BLOCK[b].labels)))
+            groups.append((f"{p}{b.lower()}", block_columns(b, p)))
     return tuple((g, names, tuple(where[c] for c in names)) for g, names in groups if all(c in where for c in names))
 
 
 def file_columns(spec: np.ndarray, mag_bias: float) -> np.ndarray:
     """The indices into a ROW_SIZE row of a solution file's columns: the contract's 35, then the
-    scale-factor and misalignment blocks the spec estimates (errmodel SP_*_SCALE, SP_*_MIS > 0) and the
-    hard iron when its initial 1-sigma ``mag_bias`` is above 0 (docs/filter.md)."""
+    scale-factor and misalignment blocks the spec estimates (errmodel SP_*_SCALE, SP_*_MIS > 0), the
+    hard iron when its initial 1-sigma ``mag_bias`` is above 0 and the wheel odometer's scale factor when
+    the spec has one (SP_WHEEL_SCALE > 0; docs/filter.md)."""
     estimated = {"SG": spec[em.SP_GYRO_SCALE] > 0.0, "SA": spec[em.SP_ACC_SCALE] > 0.0,
-                 "MG": spec[em.SP_GYRO_MIS] > 0.0, "MA": spec[em.SP_ACC_MIS] > 0.0, "MB": mag_bias > 0.0}
+                 "MG": spec[em.SP_GYRO_MIS] > 0.0, "MA": spec[em.SP_ACC_MIS] > 0.0, "MB": mag_bias > 0.0,
+                 "WS": spec[em.SP_WHEEL_SCALE] > 0.0}
     idx = list(range(OUT_SIZE))
     k = OUT_SIZE
     for name, n in zip(STATE_BLOCKS, _STATE_BLOCK_N):
@@ -756,6 +808,10 @@ def navigate_aided(
     file_units: bool = True,
     smooth: bool = False,
     smooth_dt: float = SMOOTH_DT,
+    wheel: np.ndarray | None = None,
+    wheel_lever_arm: Sequence[float] = (0.0, 0.0, 0.0),
+    wheel_scale: float = DEFAULT_WHEEL_SCALE,
+    nhc: float = 0.0,
     **options: Any,
 ) -> tuple[np.ndarray, dict[str, Any]]:
     """Aided navigation over a whole recording.
@@ -796,6 +852,10 @@ def navigate_aided(
             forward filter's; the epochs and the rows are kept in an unlinked temporary file
             (:func:`scratch`), so memory holds what the system pages in.
         smooth_dt: with ``smooth``, an epoch at least every this many seconds between measurements (s).
+        wheel: rows ``t, speed (m/s)`` optionally ``sigma`` (m/s, default DEFAULT_SIGMA_WHEEL): a wheel
+            odometer's forward speed (kalman.wheel_speed), its scale factor estimated from ``wheel_scale``
+            (initial 1-sigma, dimensionless) at the axle centre ``wheel_lever_arm`` (m, body FRD).
+        nhc: > 0: the non-holonomic constraint of a wheeled vehicle with this sigma (m/s) every NHC_EVERY s.
         options: other strapdown.make_config options.
 
     Returns:
@@ -808,12 +868,16 @@ def navigate_aided(
     cfg = sd.make_config(samples=samples, **options)
     if predict_every < 1:
         raise ValueError("predict_every must be >= 1")
-    sp = em.make_spec(spec, baro_drift, scale_factors, misalignment)
+    wh = _columns(wheel, 3, (None, None, DEFAULT_SIGMA_WHEEL), "wheel")
+    sp = em.make_spec(spec, baro_drift, scale_factors, misalignment, float(wheel_scale) if wh.shape[0] else 0.0)
+    if not (math.isfinite(nhc) and nhc >= 0.0):
+        raise ValueError(f"nhc must be finite and >= 0, got {nhc!r}")
     s = initial_state(init)
     imu = np.asarray(imu, dtype=np.float64)
     if imu.ndim != 2 or imu.shape[1] != 7:
         raise ValueError(f"imu must have shape (N, 7), got {imu.shape}")
     t = np.ascontiguousarray(imu[:, 0])
+    n_nhc = int((t[-1] - t[0]) / NHC_EVERY) + 2 if nhc > 0.0 and t.shape[0] else 0  # constraints at most
     dth = np.ascontiguousarray(imu[:, 1:4])
     dvel = np.ascontiguousarray(imu[:, 4:7])
 
@@ -842,7 +906,7 @@ def navigate_aided(
     active = np.flatnonzero(np.diag(P) > 0.0)
     if smooth:
         out = scratch((n_out, ROW_SIZE))
-        n_ep = epoch_bound(t, g, b, m, z, float(smooth_dt))
+        n_ep = epoch_bound(t, g, b, m, z, float(smooth_dt)) + wh.shape[0] + n_nhc
         store = scratch((min(n_ep, n_out), sm.store_width(active.shape[0])))
     else:
         out = np.empty((n_out, ROW_SIZE))
@@ -850,7 +914,9 @@ def navigate_aided(
     counts = np.zeros((len(KIND_NAMES), 2), dtype=np.int64)
     # one row per fix, baro, mag and attitude update (ZUPT), and per rest window a ZARU and the second
     # ZUPT of an update shared by two windows (one ends where the next starts)
-    log = np.empty((2 * g.shape[0] + b.shape[0] + m.shape[0] + n_out + 2 * z.shape[0], len(LOG_COLUMNS)))
+    # (and one per wheel row and constraint)
+    log = np.empty((2 * g.shape[0] + b.shape[0] + m.shape[0] + n_out + 2 * z.shape[0] + wh.shape[0] + n_nhc,
+                    len(LOG_COLUMNS)))
     if covariance_every < 0:
         raise ValueError("covariance_every must be >= 0")
     p_every = int(covariance_every) if covariance_every > 0 else n_out + 1
@@ -860,7 +926,8 @@ def navigate_aided(
         math.nan if mag_inclination is None else math.radians(mag_inclination),
         math.nan if mag_strength is None else float(mag_strength),
         math.nan if mag_strength_gate is None else float(mag_strength_gate), float(gate), int(predict_every),
-        P, bias, out, counts, log, p_hist, p_every, store, active, float(smooth_dt),
+        P, bias, out, counts, log, p_hist, p_every, store, active, float(smooth_dt), wh,
+        np.asarray(wheel_lever_arm, dtype=np.float64).reshape(3), float(nhc),
     )
     result = out[:rows]
     singular = 0

@@ -154,6 +154,7 @@ STATE = (
     Block("MG", 6, "rad", "gyro misalignment (off-diagonal, row-major)", sensor=True),
     Block("MA", 6, "rad", "accelerometer misalignment (off-diagonal, row-major)", sensor=True),
     Block("MB", 3, "mag", "magnetometer hard-iron bias, body FRD (the magnetometer's unit)", sensor=True),
+    Block("WS", 1, "1", "wheel odometer scale-factor error: measured speed = (1 + k) true speed", sensor=True),
 )
 OFFSET = {b.name: sum(a.size for a in STATE[:i]) for i, b in enumerate(STATE)}  # block -> first index
 NX = sum(b.size for b in STATE)
@@ -161,6 +162,7 @@ NX = sum(b.size for b in STATE)
 X_PHI, X_DV, X_DP = OFFSET["PHI"], OFFSET["DV"], OFFSET["DP"]
 X_BG, X_BA, X_GG, X_GA, X_BARO = OFFSET["BG"], OFFSET["BA"], OFFSET["GG"], OFFSET["GA"], OFFSET["BARO"]
 X_SG, X_SA, X_MG, X_MA, X_MB = OFFSET["SG"], OFFSET["SA"], OFFSET["MG"], OFFSET["MA"], OFFSET["MB"]
+X_WS = OFFSET["WS"]
 N_CONTRACT = OFFSET["GG"]  # the contract's states (attitude ... accelerometer bias); the rest follow them
 X_SENSORS = min(OFFSET[b.name] for b in STATE if b.sensor)  # the sensor errors run from here to the end
 
@@ -180,7 +182,8 @@ SP_GYRO_SCALE = 11  # initial 1-sigma of the gyro scale-factor error (dimensionl
 SP_ACC_SCALE = 12  # likewise of the accelerometer's
 SP_GYRO_MIS = 13  # initial 1-sigma of each gyro misalignment element (rad; 0: not estimated)
 SP_ACC_MIS = 14  # likewise of the accelerometer's
-SP_SIZE = 15
+SP_WHEEL_SCALE = 15  # initial 1-sigma of the wheel odometer's scale-factor error (dimensionless; 0: not estimated)
+SP_SIZE = 16
 
 _DEG = math.pi / 180.0
 _DEG_PER_H = _DEG / 3600.0
@@ -373,9 +376,14 @@ def spec_of(spec: str | ImuSpec | Mapping[str, float], scale_factors: bool = Fal
 
 
 def make_spec(spec: str | ImuSpec | Mapping[str, float], baro_drift: float = 0.0,
-              scale_factors: bool = False, misalignment: bool = False) -> np.ndarray:
-    """Process-model vector from a grade name, an ImuSpec or the contract's spec keys (:func:`spec_of`)."""
-    return spec_of(spec, scale_factors, misalignment).as_array(baro_drift)
+              scale_factors: bool = False, misalignment: bool = False, wheel_scale: float = 0.0) -> np.ndarray:
+    """Process-model vector from a grade name, an ImuSpec or the contract's spec keys (:func:`spec_of`);
+    ``wheel_scale``: the wheel odometer's initial scale-factor 1-sigma (dimensionless; 0: no odometer)."""
+    if not (math.isfinite(wheel_scale) and wheel_scale >= 0.0):
+        raise ValueError(f"wheel_scale must be finite and >= 0, got {wheel_scale!r}")
+    sp = spec_of(spec, scale_factors, misalignment).as_array(baro_drift)
+    sp[SP_WHEEL_SCALE] = wheel_scale
+    return sp
 
 
 # --- small dense linear algebra (explicit loops: numba's np.dot needs SciPy) --

@@ -24,7 +24,7 @@ EXPORTS = (
     Export("strapdown", "_run_increments", f"i8({V}, {V}, f8[:], f8[:, :], f8[:, :], {M})", frame=0, variant="views"),
     Export("strapdown", "_run_rates", f"i8({V}, {V}, f8[:], f8[:, :], f8[:, :], {M})", frame=0, variant="views"),
     Export("aided", "run_aided", f"UniTuple(i8, 3)({V}, {V}, {V}, {M}, {M}, {M}, {M}, {M}, {M}, {V}, {V}, f8, f8, f8, f8, f8, i8, "
-                                 f"{M}, {V}, {M}, i8[:, ::1], {M}, {C}, i8, {M}, i8[::1], f8)"),
+                                 f"{M}, {V}, {M}, i8[:, ::1], {M}, {C}, i8, {M}, i8[::1], f8, {M}, {V}, f8)"),
     Export("runner", "degrees_in_place", f"none({M}, i8[::1])"),
     # mavins nav --smooth: the backward pass and the smoothed rows
     Export("smoother", "backward", f"i8({M}, i8, i8)"),
@@ -54,6 +54,7 @@ EXPORTS = (
     Export("aided", "apply_mag", f"Tuple((i8, f8, f8))({V}, {V}, {V}, {M}, {V}, {V}, {V}, f8, f8, f8, f8, f8, f8, f8, {V})"),
     Export("kalman", "zupt", f"{MEASUREMENT}({V}, f8)"),
     Export("kalman", "nhc", f"{MEASUREMENT}({V}, f8)"),
+    Export("kalman", "wheel_speed", f"{MEASUREMENT}({V}, {V}, f8, {V}, {V}, f8, f8, f8)"),
     Export("kalman", "heading", f"{MEASUREMENT}({V}, f8, f8)"),
     Export("kalman", "yaw_reset", f"none({V}, {V}, {V}, {M}, f8, f8, f8, f8, f8, f8, f8, f8)"),
     Export("yawgsf", "predict", f"none({M}, {C}, {V}, {V}, f8, f8, f8, f8)"),

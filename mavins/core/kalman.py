@@ -53,6 +53,7 @@ from .errmodel import (
     SP_GYRO_GM,
     SP_GYRO_MIS,
     SP_GYRO_SCALE,
+    SP_WHEEL_SCALE,
     X_BA,
     X_BARO,
     X_BG,
@@ -67,6 +68,7 @@ from .errmodel import (
     X_SA,
     X_SENSORS,
     X_SG,
+    X_WS,
     _set_skew,
     matmul,
     matmul_bt,
@@ -83,6 +85,7 @@ B_BG, B_BA, B_GG, B_GA, B_BARO = (X_BG - X_SENSORS, X_BA - X_SENSORS, X_GG - X_S
                                   X_BARO - X_SENSORS)
 B_SG, B_SA, B_MB = X_SG - X_SENSORS, X_SA - X_SENSORS, X_MB - X_SENSORS
 B_MG, B_MA = X_MG - X_SENSORS, X_MA - X_SENSORS
+B_WS = X_WS - X_SENSORS
 B_SIZE = NX - X_SENSORS
 
 
@@ -659,6 +662,47 @@ def nhc(s: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray
 
 
 @kernel
+def wheel_speed(s: np.ndarray, bias: np.ndarray, speed: float, w_ib: np.ndarray, lever: np.ndarray, dt: float,
+                T: float, sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Wheel odometry: the forward speed ``speed`` (m/s, along body x) measured ``dt`` s before the solution
+    at the axle centre ``lever`` (m, body FRD, from the IMU) is ``(1 + k)`` times the true one, k the
+    odometer's scale-factor error (state X_WS, estimate ``bias[B_WS]``).
+
+    Predicted: ``(1 + k) u``, ``u = c_0^T v(t_m) + (w_ib x l)_x`` with c_0 the first column of C (body x in
+    NED), ``v(t_m)`` interpolated between the last two updates over the attitude interval T as in
+    :func:`gnss_velocity`, w_ib the bias-corrected body rate (rad/s; the Earth and transport rates' share,
+    below 1e-4 m/s per metre of lever arm, is left out). With the errors of :func:`nhc`, ``du = c_0^T dv +
+    (c_0 x v)^T phi + (l x db)_x`` to first order (a gyro bias error db changes the rate by -db), so H is
+    ``(1 + k)`` times that on dv, phi and both gyro bias parts, and ``u`` on X_WS; the innovation is
+    predicted minus measured, sigma m/s (Groves 2nd ed., chapters 6 and 16, odometers and their
+    integration, section numbers not checked against the book; Shin 2005, a land vehicle's odometer)."""
+    c = s[sd.S_C:sd.S_C + 9]
+    a = dt / T if T > 0.0 else 0.0
+    v0 = s[sd.S_V] - a * (s[sd.S_V] - s[sd.S_VP])
+    v1 = s[sd.S_V + 1] - a * (s[sd.S_V + 1] - s[sd.S_VP + 1])
+    v2 = s[sd.S_V + 2] - a * (s[sd.S_V + 2] - s[sd.S_VP + 2])
+    c0, c1, c2 = c[0], c[3], c[6]  # column 0 of C: row x of C^T
+    u = c0 * v0 + c1 * v1 + c2 * v2 + w_ib[1] * lever[2] - w_ib[2] * lever[1]
+    g = 1.0 + bias[B_WS]
+    nu = np.empty(1)
+    H = np.zeros((1, NX))
+    R = np.zeros((1, 1))
+    nu[0] = g * u - speed
+    H[0, X_DV] = g * c0
+    H[0, X_DV + 1] = g * c1
+    H[0, X_DV + 2] = g * c2
+    H[0, X_PHI] = g * (c1 * v2 - c2 * v1)
+    H[0, X_PHI + 1] = g * (c2 * v0 - c0 * v2)
+    H[0, X_PHI + 2] = g * (c0 * v1 - c1 * v0)
+    for x0 in (X_BG, X_GG):  # (l x db)_x = l_y db_z - l_z db_y
+        H[0, x0 + 1] = -g * lever[2]
+        H[0, x0 + 2] = g * lever[1]
+    H[0, X_WS] = u
+    R[0, 0] = sigma * sigma
+    return nu, H, R
+
+
+@kernel
 def zupt(s: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Zero-velocity update: the vehicle is at rest, v = 0 (sigma m/s per axis)."""
     nu = np.empty(3)
@@ -737,4 +781,5 @@ def initial_covariance(
     P[X_PHI + 1, X_PHI + 1] = sigma_level * sigma_level
     P[X_PHI + 2, X_PHI + 2] = sigma_yaw * sigma_yaw
     P[X_BARO, X_BARO] = sigma_baro * sigma_baro
+    P[X_WS, X_WS] = spec[SP_WHEEL_SCALE] ** 2
     return P

@@ -17,7 +17,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..core import align, earth, kalman, magmodel, yawgsf
+from ..core import aided, align, earth, kalman, magmodel, yawgsf
 from ..core import strapdown as sd
 from ..core.jit import for_frame
 from ..core.records import ImuSample, Solution
@@ -79,7 +79,7 @@ class EngineConfig:
     zupt_accel: float = 0.15  # m/s^2: ||f| - g| below this likewise
     zupt_still_s: float = 0.5  # s of still samples before zero-velocity updates start
     zupt_every_s: float = 0.1  # s between zero-velocity updates while still
-    nhc_every_s: float = 0.1  # s between non-holonomic constraints (--aiding ...,nhc), while navigating
+    nhc_every_s: float = aided.NHC_EVERY  # s between non-holonomic constraints (--aiding ...,nhc), while navigating
     aiding_every_s: float = 0.02  # s between magnetometer updates (a sample up to a quarter of it early is taken)
 
 
@@ -496,6 +496,12 @@ class Engine:
         """A barometric height (m, with an unknown offset the filter estimates)."""
         if self.state is State.NAVIGATING and self._s is not None:
             self.filter.measure(self._s, self._kcfg, sd.state_time(self._s) if t is None else t, "baro", h, sigma)
+
+    def on_wheel(self, t: float | None, speed: float, sigma: float) -> None:
+        """A wheel odometer's forward speed (m/s, body x at the axle centre; 1-sigma m/s), measured at t."""
+        if self.state is State.NAVIGATING and self._s is not None:
+            self.filter.measure(self._s, self._kcfg, sd.state_time(self._s) if t is None else t, "wheel", speed,
+                                sigma)
 
     def _output_due(self, t: float) -> bool:
         """One output set each time sensor time crosses a multiple of 1/rate (docs/conventions.md

@@ -25,7 +25,7 @@ from ..core.jit import for_frame
 from ..core.records import Uncertainty
 from .smoothing import EpochLog
 
-AIDING_KINDS = ("gnss", "baro", "mag", "zupt", "nhc")
+AIDING_KINDS = ("gnss", "baro", "mag", "zupt", "nhc", "wheel")
 ABS_TIMEOUT_S = 5.0  # s of sensor time after the last accepted fix during which position counts as absolute
 GNSS_LOST_S = 3.0  # s without an accepted fix after which GNSS is reported lost
 JUMP_M = 1.0  # m: an accepted position correction above this is a discontinuity (reset_counter)
@@ -59,7 +59,10 @@ class FilterSettings:
     misalignment: bool = False  # estimate the gyro and accelerometer misalignments (errmodel.spec_of)
     sigma_mag_bias: float = 0.0  # gauss per axis: initial 1-sigma of the hard iron (0: taken as calibrated, not estimated)
     sigma_zupt: float = aided.DEFAULT_SIGMA_ZUPT  # m/s (the batch filter's default)
-    sigma_nhc: float = 0.1  # m/s: the non-holonomic constraint's sideways and vertical body velocity (ground vehicles)
+    wheel_lever_arm: tuple[float, float, float] = (0.0, 0.0, 0.0)  # m, body FRD: the odometer's axle centre
+    sigma_wheel: float = aided.DEFAULT_SIGMA_WHEEL  # m/s: the odometer's speed noise
+    wheel_scale: float = aided.DEFAULT_WHEEL_SCALE  # its scale factor's initial 1-sigma (estimated with wheel aiding)
+    sigma_nhc: float = aided.DEFAULT_SIGMA_NHC  # m/s: the non-holonomic constraint's sideways and vertical body velocity
     predict_dt: float = 0.01  # s: the covariance is propagated at about this interval
     delays: dict[str, float] = field(default_factory=dict)  # s by kind (gnss, baro, mag): measured this long before its stamp
     smooth: bool = False  # keep the smoother's epochs (EpochLog) for a fixed-interval smoothed solution afterwards
@@ -83,9 +86,11 @@ class LiveFilter:
         for k in self.settings.aiding:
             if k not in AIDING_KINDS:
                 raise ValueError(f"aiding kinds are {', '.join(AIDING_KINDS)} (or none), got {k!r}")
-        self.spec = errmodel.make_spec(self.settings.spec, scale_factors=self.settings.scale_factors,
-                                       misalignment=self.settings.misalignment)
-        self.lever = np.asarray(self.settings.lever_arm, dtype=float).reshape(3)
+        st = self.settings
+        self.spec = errmodel.make_spec(st.spec, scale_factors=st.scale_factors, misalignment=st.misalignment,
+                                       wheel_scale=st.wheel_scale if "wheel" in st.aiding else 0.0)
+        self.lever = np.asarray(st.lever_arm, dtype=float).reshape(3)
+        self.wheel_lever = np.asarray(st.wheel_lever_arm, dtype=float).reshape(3)
         self.P = np.zeros((errmodel.NX, errmodel.NX))
         self.bias = np.zeros(kalman.B_SIZE)
         self.acc = np.zeros(aided.ACC_SIZE)
@@ -305,6 +310,10 @@ class LiveFilter:
                 self._update(s, cfg, "gnss_yaw", ("mag",), kalman.heading(s, yaw, sigma))
         elif kind == "zupt":
             self._update(s, cfg, "zupt", ("vel",), kalman.zupt(s, self.settings.sigma_zupt))
+        elif kind == "wheel":  # a wheel odometer's forward speed (m/s, 1-sigma m/s) at the axle centre
+            speed, sigma = args
+            self._update(s, cfg, "wheel", ("vel",), kalman.wheel_speed(
+                s, self.bias, speed, np.array(self._w_ib), self.wheel_lever, late, self._T_k, sigma))
         elif kind == "nhc":  # a wheeled vehicle: no sideways and no vertical body velocity
             self._update(s, cfg, "nhc", ("vel",), kalman.nhc(s, self.settings.sigma_nhc))
 

@@ -41,6 +41,7 @@ GNSS_MAX_SIGMA = 50.0  # m: a fix claiming a worse 1-sigma accuracy is rejected 
 GNSS_HEIGHT_RANGE = (-1000.0, 50000.0)  # m, ellipsoidal: below the Dead Sea's shore, above stratospheric balloons
 GNSS_MAX_SPEED = 600.0  # m/s horizontal: above the receivers' export limit (1,000 knots, 514 m/s)
 GPS_FIX_3D, GPS_FIX_PPP = 3, 8  # GPS_FIX_TYPE: 3D fix .. PPP are fixes; other values carry no fix
+WHEEL_MAX_GAP_S = 1.0  # s: two WHEEL_DISTANCE messages further apart give no speed (a gap, counted)
 
 
 @dataclass
@@ -57,6 +58,7 @@ class Pipeline:
     recorder: Sink | None = None
     _outputs: int = 0
     imuset: ImuSet | None = field(init=False, default=None)
+    _wheel: tuple[float, float, int] | None = None  # the last WHEEL_DISTANCE: time (s), mean distance (m), count
 
     def __post_init__(self) -> None:
         self.engine = Engine(self.engine_cfg)
@@ -126,6 +128,8 @@ class Pipeline:
         elif name == "SCALED_PRESSURE" and math.isfinite(msg.press_abs) and msg.press_abs > 0.0:  # type: ignore[attr-defined]
             self.engine.on_baro(self._on_imu_clock(self._unwrap_ms(msg.time_boot_ms)), isa_height(msg.press_abs),  # type: ignore[attr-defined]
                                 BARO_SIGMA_M)
+        elif name == "WHEEL_DISTANCE":
+            self._wheel_distance(msg)
         elif name == "SYSTEM_TIME" and msg.time_unix_usec:  # type: ignore[attr-defined]
             self.engine.set_date(msg.time_unix_usec * 1e-6)  # type: ignore[attr-defined]
         elif name == "GLOBAL_POSITION_INT" and (msg.lat or msg.lon):  # type: ignore[attr-defined]
@@ -181,6 +185,28 @@ class Pipeline:
         if last is None:
             return t
         return t + round((last.t - t) / MS_WRAP_S) * MS_WRAP_S
+
+    def _wheel_distance(self, msg: object) -> None:
+        """WHEEL_DISTANCE (time_usec, count, distance[16] m, cumulative per wheel): the forward speed at the
+        axle centre is the change of the wheels' mean distance over the time between two messages, stamped
+        at the middle of that interval; a first message, a change of wheel count, a step back in time or
+        more than WHEEL_MAX_GAP_S between two give none (counted ``wheel_gap``), a non-finite distance is
+        counted ``wheel_invalid``."""
+        n = int(msg.count)  # type: ignore[attr-defined]
+        d = msg.distance[:n] if 0 < n <= len(msg.distance) else ()  # type: ignore[attr-defined]
+        if not d or not all(math.isfinite(x) for x in d):
+            self.counters["wheel_invalid"] += 1
+            return
+        t, dist = msg.time_usec * 1e-6, sum(d) / n  # type: ignore[attr-defined]
+        prev, self._wheel = self._wheel, (t, dist, n)
+        if prev is None:
+            return
+        dt = t - prev[0]
+        if prev[2] != n or not 0.0 < dt <= WHEEL_MAX_GAP_S:
+            self.counters["wheel_gap"] += 1
+            return
+        flt = self.engine_cfg.filter
+        self.engine.on_wheel(self._on_imu_clock(t - 0.5 * dt), (dist - prev[1]) / dt, flt.sigma_wheel)
 
     def _on_imu_clock(self, t: float | None) -> float | None:
         """A message's own time if it is on the IMU's clock (within CLOCK_MATCH_S of the last

@@ -92,7 +92,7 @@ def test_gnss_position_and_baro_by_hand() -> None:
                                atol=0)
     np.testing.assert_array_equal(rows[:, col("sigma_vn")], 0.0)
     assert st["counts"] == {"gnss_pos": (1, 0), "gnss_vel": (0, 0), "baro": (1, 0), "mag": (0, 0), "zupt": (0, 0),
-                            "zaru": (0, 0), "mag_disturbed": (0, 0)}
+                            "zaru": (0, 0), "mag_disturbed": (0, 0), "wheel": (0, 0), "nhc": (0, 0)}
     log = st["nis"]
     assert log.shape == (2, 6)
     np.testing.assert_allclose(log[0], [0.05, aided.K_GNSS_POS, (9 + 36 + 2.25) / 8, 3, 1, 6 / math.sqrt(8) / 5],
@@ -302,7 +302,7 @@ def test_after_k_update_accumulates_and_decays() -> None:
     np.testing.assert_allclose(acc[9:12], c @ [1.0, 2.0, 3.0], atol=1e-15)
     assert acc[12] == pytest.approx(0.2, rel=1e-15)
     e = math.exp(-0.2 / 0.5)
-    np.testing.assert_allclose(bias, [1, 2, 3, 4, 5, 6, 7 * e, 8 * e, 9 * e, 10, 11, 12, 13] + [0] * 21, rtol=1e-15)
+    np.testing.assert_allclose(bias, [1, 2, 3, 4, 5, 6, 7 * e, 8 * e, 9 * e, 10, 11, 12, 13] + [0] * (kf.B_SIZE - 13), rtol=1e-15)
     np.testing.assert_array_equal(P, np.eye(em.NX))  # 3 % 2: not propagated
     s[sd.S_NK] = 4
     s[sd.S_T] = 0.35
@@ -313,7 +313,7 @@ def test_after_k_update_accumulates_and_decays() -> None:
     T = aided.after_k_update(s, cfg, spec, P, bias, acc, sums, 2, sd.GEOGRAPHIC)
     assert T == pytest.approx(0.1, rel=1e-14)
     e = math.exp(-0.1 / 0.25)
-    np.testing.assert_allclose(bias, [1, 2, 3, 4, 5, 6, 7, 8, 9, 10 * e, 11 * e, 12 * e, 13] + [0] * 21, rtol=1e-15)
+    np.testing.assert_allclose(bias, [1, 2, 3, 4, 5, 6, 7, 8, 9, 10 * e, 11 * e, 12 * e, 13] + [0] * (kf.B_SIZE - 13), rtol=1e-15)
     assert np.all(acc == 0.0)  # propagated (4 % 2 == 0) over the 0.3 s accumulated: acc reset
     assert P[6, 6] == pytest.approx(0.3**2, rel=1e-12)  # dp from dv over T = 0.3 s, P_vv = 1
     assert P[6, 3] == pytest.approx(0.3, rel=1e-12)
@@ -477,7 +477,7 @@ def test_samples_two_and_a_duplicate_row() -> None:
     rows = np.insert(rows, 5, rows[4] * [1, 100, 100, 100, 1, 1, 1], axis=0)  # t = 0.05 again, a wild rate
     spec = em.ImuSpec(gyro_bias=1e-3)
     s, P, b, out, counts, log = run_direct(rows, spec=spec, cfg=cfg, static=[[0.0, 0.1, 1.0, 1e-3]],
-                                           P=np.diag([0.0] * 9 + [1e-6] * 3 + [0.0] * 31))
+                                           P=np.diag([0.0] * 9 + [1e-6] * 3 + [0.0] * (em.NX - 12)))
     assert len(out) == 5
     np.testing.assert_allclose(out[:, 0], [0.02, 0.04, 0.06, 0.08, 0.1], atol=1e-15)
     assert counts[aided.K_ZARU].tolist() == [1, 0]
@@ -527,13 +527,13 @@ def test_skip_rules_of_a_fresh_and_a_continued_run() -> None:
     g_row = lambda t: [t, lat, lon, H0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0]  # noqa: E731
     b_row = lambda t: [t, H0, 1.0]  # noqa: E731
     m_row = lambda t: [t, 1.0, 0.0, 1.0, 0.1]  # noqa: E731
-    P = np.diag([0.01, 0.01, 0.01, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0] + [0.0] * 12 + [1.0] + [0.0] * 21)
+    P = np.diag([0.01, 0.01, 0.01, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0] + [0.0] * 12 + [1.0] + [0.0] * (em.NX - 22))
     kw = dict(gnss=[g_row(-2.0), g_row(-1.0), g_row(0.0), g_row(0.03)], baro=[b_row(-2.0), b_row(-1.0), b_row(0.0),
               b_row(0.03)], mag=[m_row(-2.0), m_row(-1.0), m_row(0.0), m_row(0.03)],
               static=[[-3.0, -2.0, 0.5, 1.0], [-2.0, -1.0, 0.5, 1.0], [0.0, 0.01, 0.5, 1.0]])
     s, P1, _, out, counts, log = run_direct(imu(5), P=P.copy(), **kw)
-    assert counts[:, 0].tolist() == [2, 2, 2, 2, 1, 1, 0]  # the window [0, 0.01]: a ZUPT and the ZARU at 0.01
-    assert counts[:, 1].tolist() == [0] * 7
+    assert counts[:, 0].tolist() == [2, 2, 2, 2, 1, 1, 0, 0, 0]  # the window [0, 0.01]: a ZUPT and the ZARU at 0.01
+    assert counts[:, 1].tolist() == [0] * 9
     assert log[0, 0] == 0.0 and log[0, 1] == aided.K_GNSS_POS
     # continued after exactly one update: rows at its time (0.01) are skipped, later ones used
     s = sd.init_state(0.0, lat, lon, H0, np.zeros(3), 0.0, 0.0, 0.0)
@@ -542,7 +542,7 @@ def test_skip_rules_of_a_fresh_and_a_continued_run() -> None:
     kw = dict(gnss=[g_row(0.01), g_row(0.03)], baro=[b_row(0.01), b_row(0.03)], mag=[m_row(0.01), m_row(0.03)],
               static=[[0.005, 0.04, 0.005, 1.0]])
     s, P2, _, out, counts, log = run_direct(imu(5)[1:], P=P2, s=s, **kw)
-    assert counts[:, 0].tolist() == [1, 1, 1, 1, 3, 1, 0]
+    assert counts[:, 0].tolist() == [1, 1, 1, 1, 3, 1, 0, 0, 0]
     # one window before the start, then one at it
     _, _, _, _, counts, _ = run_direct(imu(3), P=P.copy(), static=[[-2.0, -1.0, 0.5, 1.0], [0.0, 0.02, 0.5, 1.0]])
     assert counts[aided.K_ZUPT].tolist() == [2, 0]
@@ -590,7 +590,7 @@ def test_late_measurements_are_taken_back_along_the_velocity() -> None:
     time, are applied at the update of 0.05 s with zero innovation (p(t_m) = p(t_k) - v (t_k - t_m))."""
     lat, lon = math.radians(LAT0), math.radians(LON0)
     s = sd.init_state(0.0, lat, lon, H0, np.array([1.0, 0.0, 1.0]), 0.0, 0.0, 0.0)
-    P = np.diag([0.0] * 6 + [1.0] * 3 + [0.0] * 12 + [1.0] + [0.0] * 21)
+    P = np.diag([0.0] * 6 + [1.0] * 3 + [0.0] * 12 + [1.0] + [0.0] * (em.NX - 22))
     tm = 0.045
     s, P, b, out, c, log = run_direct(imu(), P=P, s=s, gnss=[[tm, lat + tm / (RN + H0), lon, H0 - tm, NAN, NAN, NAN,
                                                                 1.0, 1.0, 1.0]], baro=[[tm, H0 - tm, 1.0]])
@@ -606,7 +606,7 @@ def test_partial_rows_are_not_used() -> None:
             [0.04, lat, lon, NAN, NAN, NAN, 0.0, 1.0, 1.0, 1.0]]
     baro = [[0.02, NAN, 1.0]]
     mag = [[0.02, NAN, 1.0, 1.0, 0.1], [0.03, 1.0, NAN, 1.0, 0.1], [0.04, 1.0, 0.0, NAN, 0.1]]
-    P = np.diag([0.01] * 3 + [1.0] * 6 + [0.0] * 12 + [1.0] + [0.0] * 21)
+    P = np.diag([0.01] * 3 + [1.0] * 6 + [0.0] * 12 + [1.0] + [0.0] * (em.NX - 22))
     _, _, _, out, c, log = run_direct(imu(), P=P, gnss=gnss, baro=baro, mag=mag)
     assert c.sum() == 0 and len(log) == 0
 
@@ -616,7 +616,7 @@ def test_a_velocity_without_its_down_component_gives_the_horizontal_rows() -> No
     is fused as the two horizontal rows (dof 2), in the batch as the live path does (aided.apply_gnss); at
     rest with P_vel = 1 and sigma_vel 1 its NIS is 0 (zero innovation)."""
     gnss = [[0.02, NAN, NAN, NAN, 0.0, 0.0, NAN, 1.0, 1.0, 1.0]]
-    P = np.diag([0.01] * 3 + [1.0] * 6 + [0.0] * 12 + [1.0] + [0.0] * 21)
+    P = np.diag([0.01] * 3 + [1.0] * 6 + [0.0] * 12 + [1.0] + [0.0] * (em.NX - 22))
     _, _, _, _, c, log = run_direct(imu(), P=P, gnss=gnss)
     assert c[aided.K_GNSS_VEL, 0] == 1 and c.sum() == 1
     assert log[0, 1] == aided.K_GNSS_VEL and log[0, 3] == 2 and log[0, 2] < 1e-12
@@ -663,15 +663,15 @@ def test_log_rows_of_every_kind() -> None:
     """Each measurement's log row: t (its own, or the update's for ZUPT/ZARU), kind, NIS, dof, accepted, ratio
     (NIS and ratio worked by hand: P 1, R 1, nu 1 per measured axis; gate 5)."""
     lat, lon = math.radians(LAT0), math.radians(LON0)
-    P = np.diag([0.0, 0.0, 1.0] + [1.0] * 3 + [0.0] * 3 + [0.0] * 12 + [1.0] + [0.0] * 21)
+    P = np.diag([0.0, 0.0, 1.0] + [1.0] * 3 + [0.0] * 3 + [0.0] * 12 + [1.0] + [0.0] * (em.NX - 22))
     gnss = [[0.02, NAN, NAN, NAN, -1.0, -1.0, -1.0, 1.0, 1.0, 1.0]]
     rows = imu(wz=0.0)
     _, _, _, out, c, log = run_direct(rows, P=P, gnss=gnss)
     np.testing.assert_allclose(log[0], [0.02, aided.K_GNSS_VEL, 1.5, 3, 1, 1 / math.sqrt(2) / 5], rtol=1e-12)
-    P = np.diag([0.0, 0.0, 0.01] + [0.0] * 18 + [0.0] * 22)
+    P = np.diag([0.0, 0.0, 0.01] + [0.0] * 18 + [0.0] * (em.NX - 21))
     _, _, _, out, c, log = run_direct(rows, P=P, mag=[[0.03, math.cos(0.1), -math.sin(0.1), 0.0, 0.1]])
     np.testing.assert_allclose(log[0], [0.03, aided.K_MAG, 0.5, 1, 1, 0.1 / math.sqrt(0.02) / 5], rtol=1e-12)
-    P = np.diag([0.0] * 3 + [1.0] * 3 + [0.0] * 3 + [0.0] * 2 + [1e-6] + [0.0] * 31)
+    P = np.diag([0.0] * 3 + [1.0] * 3 + [0.0] * 3 + [0.0] * 2 + [1e-6] + [0.0] * (em.NX - 12))
     s = sd.init_state(0.0, lat, lon, H0, np.array([0.0, 0.0, 1.0]), 0.0, 0.0, 0.0)
     _, _, _, out, c, log = run_direct(imu(wz=1e-3), P=P, s=s, static=[[0.0, 0.01, 1.0, 1e-3]])
     np.testing.assert_allclose(log[0], [0.01, aided.K_ZUPT, 0.5, 3, 1, 1 / math.sqrt(2) / 5], rtol=1e-9)
@@ -687,7 +687,7 @@ def test_rest_windows_in_a_row() -> None:
     rows[:, 3] = 2e-3 * DT
     rows[1, 3] = rows[8, 3] = 1.0 * DT  # t = 0.02 and 0.09
     rows[5:8, 3] = 6e-3 * DT  # 0.06 .. 0.08
-    P = np.diag([0.0] * 3 + [1.0] * 3 + [0.0] * 5 + [1.0] + [0.0] * 31)
+    P = np.diag([0.0] * 3 + [1.0] * 3 + [0.0] * 5 + [1.0] + [0.0] * (em.NX - 12))
     static = [[0.02, 0.04, 1.0, 1.0], [0.045, 0.05, 1.0, 1.0], [0.055, 0.085, 1.0, 1.0], [0.091, 0.095, 1.0, 1.0]]
     _, _, b, out, c, log = run_direct(rows, P=P, static=static)
     assert c[aided.K_ZUPT].tolist() == [7, 0] and c[aided.K_ZARU].tolist() == [3, 0]
@@ -703,7 +703,7 @@ def test_rest_windows_in_a_row() -> None:
 
 def test_direct_p_history_keeps_only_what_fits() -> None:
     """p_hist receives P after every p_every-th output row while it has room (run_aided docstring)."""
-    P = np.diag([0.0] * 6 + [4.0] * 3 + [0.0] * 34)
+    P = np.diag([0.0] * 6 + [4.0] * 3 + [0.0] * (em.NX - 9))
     hist = np.full((2, em.NX, em.NX), -1.0)
     _, _, _, out, _, _ = run_direct(imu(), P=P, p_hist=hist, p_every=3)
     assert len(out) == N_ROWS
@@ -851,15 +851,17 @@ def test_the_nis_log_holds_every_measurement() -> None:
 def test_module_level_names_and_kinds() -> None:
     """The constants mutmut does not mutate, by value (aided.py's module docstring and LOG_COLUMNS)."""
     assert (aided.K_GNSS_POS, aided.K_GNSS_VEL, aided.K_BARO, aided.K_MAG, aided.K_ZUPT, aided.K_ZARU,
-            aided.K_MAG_DISTURBED) == tuple(range(7))
-    assert aided.KIND_NAMES == ("gnss_pos", "gnss_vel", "baro", "mag", "zupt", "zaru", "mag_disturbed")
+            aided.K_MAG_DISTURBED, aided.K_WHEEL, aided.K_NHC) == tuple(range(9))
+    assert aided.KIND_NAMES == ("gnss_pos", "gnss_vel", "baro", "mag", "zupt", "zaru", "mag_disturbed", "wheel", "nhc")
     # the magnetometer's checks (PX4 EKF2's EKF2_MAG_CHK_INC 20 deg, EKF2_MAG_CHK_STR 0.2 gauss) and reset
     assert aided.MAG_INCL_GATE == math.radians(20.0) and aided.MAG_STRENGTH_GATE == 0.2
     assert aided.MAG_RESET_AFTER == 50 and kf.MAG_STATS == 5 and aided.ACC_SIZE == 19
-    assert aided.ROW_SIZE == 35 + 6 + 6 + 12 + 12 + 6 and aided.STATE_BLOCKS == ("SG", "SA", "MG", "MA", "MB")
+    assert aided.ROW_SIZE == 35 + 6 + 6 + 12 + 12 + 6 + 2 and aided.STATE_BLOCKS == ("SG", "SA", "MG", "MA", "MB",
+                                                                                     "WS")
+    assert aided.STATE_COLUMNS[-2:] == ("ws", "sigma_ws")  # a single value: the block's name alone
     assert aided.STATE_COLUMNS[12:24] == ("mg_xy", "mg_xz", "mg_yx", "mg_yz", "mg_zx", "mg_zy", "sigma_mg_xy",
                                           "sigma_mg_xz", "sigma_mg_yx", "sigma_mg_yz", "sigma_mg_zx", "sigma_mg_zy")
-    assert aided.STATE_COLUMNS[:3] == ("sg_x", "sg_y", "sg_z") and aided.STATE_COLUMNS[-3:] == (
+    assert aided.STATE_COLUMNS[:3] == ("sg_x", "sg_y", "sg_z") and aided.STATE_COLUMNS[-5:-2] == (
         "sigma_mb_x", "sigma_mb_y", "sigma_mb_z")
     assert aided.GNSS_COLUMNS == ("t", "lat", "lon", "h", "vn", "ve", "vd", "sigma_h", "sigma_v", "sigma_vel")
     assert aided.BARO_COLUMNS == ("t", "h", "sigma") and aided.MAG_COLUMNS == ("t", "mx", "my", "mz", "sigma")
@@ -888,7 +890,7 @@ def test_a_rejected_measurement_leaves_no_trace() -> None:
     counted rejected with its position (a glitch), and P, the solution and the rows equal those of the run
     without that row bit for bit, although it fell between the propagations (aided.keep_or_undo). A rejected
     baro sample likewise; an accepted fix does change P."""
-    P = np.diag([1e-4] * 3 + [0.01] * 3 + [1.0] * 3 + [1e-6] * 12 + [1.0] + [0.0] * 21)
+    P = np.diag([1e-4] * 3 + [0.01] * 3 + [1.0] * 3 + [1e-6] * 12 + [1.0] + [0.0] * (em.NX - 22))
     lat0, lon0 = math.radians(LAT0), math.radians(LON0)
     good = [0.045, lat0, lon0, H0, 0.0, 0.0, 0.0, 1.0, 1.0, 0.1]
     far = [0.055, lat0 + 1000.0 / RN, lon0, H0, 0.05, 0.0, 0.0, 1.0, 1.0, 0.1]

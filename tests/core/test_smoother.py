@@ -40,8 +40,7 @@ def make_store(pp: np.ndarray, pm: np.ndarray, phi: np.ndarray, dx: np.ndarray) 
         o = 2 + 2 * n
         store[k, o:o + n * n] = pm[k].ravel()
         store[k, o + n * n:o + 2 * n * n] = pp[k].ravel()
-        if k > 0:
-            store[k, o + 2 * n * n:] = phi[k - 1].ravel()
+        store[k, o + 2 * n * n:] = phi[k - 1].ravel() if k > 0 else np.eye(n).ravel()  # the first: the start's
     return store
 
 
@@ -117,6 +116,19 @@ def test_an_epoch_without_a_positive_definite_prior_keeps_the_forward_estimate()
     pp2[:, 0, 0], pp2[:, 1, 1], phi2[:, 0, 0], phi2[:, 1, 1] = pp[:, 0, 0], 1.0, 1.0, 1.0
     e, ps, bad = backward(pp2, pm2, phi2, np.zeros((5, 2)))
     assert bad == 1 and np.array_equal(ps[2], pp2[2])
+    assert np.isfinite(ps).all() and np.isfinite(e).all()  # the epochs before it go on from P^+
+    pm2[4, 0, 1] = pm2[4, 1, 0] = 10.0  # a second one: both counted
+    assert backward(pp2, pm2, phi2, np.zeros((5, 2)))[2] == 2
+
+
+def test_no_epoch_or_one_is_left_as_it_is() -> None:
+    """An empty store, and a store of one epoch (the last is its own smoothed estimate), are left alone."""
+    assert smoother.backward(np.zeros((0, smoother.store_width(2))), 0, 2) == 0
+    pp, pm, phi, dx = random_walk(1, 4.0, 0.5, 1.0, 0.3, 2.0)
+    store = make_store(pp, pm, phi, dx)
+    before = store.copy()
+    assert smoother.backward(store, 1, 1) == 0
+    np.testing.assert_array_equal(store, before)
 
 
 def test_record_writes_the_active_states_in_the_documented_layout() -> None:
@@ -213,14 +225,14 @@ def test_correct_solution_moves_a_row_as_feedback_moves_the_state() -> None:
 
 
 def test_smooth_rows_interpolates_between_epochs_and_keeps_the_rows_after_the_last() -> None:
-    """Two epochs at rows 0 and 4 (t 0 and 1 s) over the north position and the x gyro bias: row 2 (t 0.5)
+    """Two epochs at rows 0 and 4 (t 0 and 2 s) over the north position and the x gyro bias: row 2 (t 1 s)
     is corrected by the mean of e^s_0 and e^s_1 + dx_1, its variance the mean of P^s_0 and P^s_1; row 0 by
     e^s_0 with P^s_0; rows 4 and 5 (the last epoch and after) keep the forward values."""
     act = np.array([em.X_DP, em.X_BG])
     na = 2
     store = np.zeros((2, smoother.store_width(na)))
     o_dx, o_e, o_pm, o_pp, o_phi = 2, 4, 6, 10, 14
-    store[:, 0], store[:, 1] = (0.0, 1.0), (0, 4)
+    store[:, 0], store[:, 1] = (0.0, 2.0), (0, 4)
     store[0, o_e:o_e + 2] = (2.0, 1e-4)  # e^s_0: 2 m north, 1e-4 rad/s
     store[1, o_e:o_e + 2] = (0.0, 0.0)
     store[1, o_dx:o_dx + 2] = (4.0, 3e-4)
@@ -228,7 +240,7 @@ def test_smooth_rows_interpolates_between_epochs_and_keeps_the_rows_after_the_la
     store[1, o_pp:o_pp + 4] = (16.0, 0.0, 0.0, 3e-8)
     out = np.zeros((6, aided.ROW_SIZE))
     lat = math.radians(47.0)
-    out[:, 0] = np.arange(6) * 0.25
+    out[:, 0] = np.arange(6) * 0.5
     out[:, 1], out[:, 3], out[:, 10] = lat, 100.0, 1.0  # latitude, height, identity attitude
     out[:, 23] = 5e-4  # forward gyro bias x
     out[:, 29] = 7e-3  # forward sigma_bg_x
@@ -266,3 +278,69 @@ def test_filter_row_writes_over_whatever_the_row_held() -> None:
     out[:14] = 0.0
     aided.filter_row(np.eye(NX), np.zeros(kalman.B_SIZE), out)
     assert np.isfinite(out).all()
+
+
+def test_rows_before_the_first_epoch_and_between_epochs_at_one_time() -> None:
+    """Row 0 written before any epoch keeps the forward values (and the rows after it are still smoothed);
+    row 1 refers to epoch 0 while epoch 1 has the same time (two updates at one instant): it takes epoch 1's
+    prior error, e^s_1 + dx_1; row 2, written after t_1 but before epoch 1 (a late measurement stamped
+    earlier), is held at t_1, not carried beyond it."""
+    act = np.array([em.X_DP])
+    store = np.zeros((3, smoother.store_width(1)))
+    store[:, 0] = (1.0, 1.0, 3.0)
+    store[:, 3] = (1.0, 0.5, 0.0)  # e^s
+    store[:, 2] = (0.0, 2.0, 4.0)  # dx
+    store[:, 5] = (9.0, 9.0, 9.0)  # P^s
+    lat = math.radians(47.0)
+    out = np.zeros((3, aided.ROW_SIZE))
+    out[:, 0], out[:, 1], out[:, 10] = (0.5, 1.0, 5.0), lat, 1.0
+    fwd = out.copy()
+    aided.smooth_rows(out, 3, np.array([0, 1, 2]), store, 3, act)
+    r_n = earth.radii(lat)[0]
+    np.testing.assert_array_equal(out[0], fwd[0])
+    assert out[1, 1] == pytest.approx(lat - 2.5 / r_n, abs=1e-16) and out[1, 14] == 3.0
+    assert out[2, 1] == pytest.approx(lat - 4.0 / r_n, abs=1e-16) and out[2, 14] == 3.0
+
+
+@pytest.mark.parametrize("yaw", [30.0, 179.9])
+def test_correct_solution_keeps_the_scalar_part_non_negative(yaw: float) -> None:
+    """A heading correction across 180 deg: the corrected row's quaternion keeps a non-negative scalar part
+    and its Euler angles, as solution_row writes them for the corrected state."""
+    s = sd.init_state(0.0, math.radians(47.4), math.radians(8.5), 500.0, np.zeros(3), 0.0, 0.0, math.radians(yaw))
+    x = np.zeros(NX)
+    x[2] = math.radians(-0.5)  # feedback turns the heading by +0.5 deg
+    row, want = np.empty(14), np.empty(14)
+    for_frame(sd.solution_row, sd.GEOGRAPHIC)(s, CFG, row)
+    kalman.feedback(s, CFG, np.zeros(kalman.B_SIZE), x.copy())
+    for_frame(sd.solution_row, sd.GEOGRAPHIC)(s, CFG, want)
+    smoother.correct_solution(row, x)
+    assert row[10] >= 0.0
+    np.testing.assert_allclose(row[7:14], want[7:14], rtol=0, atol=1e-14)
+
+
+def test_filter_sigmas_of_small_variances() -> None:
+    """Every sigma column is the square root of its variance, below 1 too (P = 0.25 I: 0.5; the bias columns
+    of the sum of two parts: sqrt(0.5))."""
+    out = np.zeros(aided.ROW_SIZE)
+    aided.filter_sigmas(0.25 * np.eye(NX), out)
+    sig = [c for c in range(aided.ROW_SIZE) if aided.ROW_COLUMNS[c].startswith("sigma_")]
+    want = [math.sqrt(0.5) if aided.ROW_COLUMNS[c][6:8] in ("bg", "ba") else 0.5 for c in sig]
+    np.testing.assert_allclose(out[sig], want, rtol=1e-15)
+
+
+def test_scratch_is_a_zeroed_writable_file_backed_array() -> None:
+    a = aided.scratch((3, 4))
+    assert a.shape == (3, 4) and a.dtype == np.float64 and not a.any()
+    a[2, 3] = 5.0
+    assert a[2, 3] == 5.0 and a.base is not None  # a view of the mapped file
+    assert aided.scratch((0, 5)).shape == (0, 5)
+
+
+def test_epoch_bound_counts_what_can_make_an_epoch() -> None:
+    """Rows of 0.1 s over 10 s; 3 fixes, 2 baro, 1 magnetometer row; two rest windows holding 5 and 0 IMU rows:
+    3 + 2 + 1 + 2 x 2 windows + 2 + 5 + 0 + (10 - 0.1) / 1 + 1 = 27."""
+    t = np.arange(1, 101) * 0.1
+    g, b, m = np.zeros((3, 10)), np.zeros((2, 3)), np.zeros((1, 5))
+    z = np.array([[1.0, 1.5, 0.0, 0.0], [20.0, 21.0, 0.0, 0.0]])
+    assert aided.epoch_bound(t, g, b, m, z, 1.0) == 3 + 2 + 1 + 4 + 2 + 5 + 0 + 9 + 1
+    assert aided.epoch_bound(t[:0], g, b, m, z[:0], 1.0) == 3 + 2 + 1 + 2
