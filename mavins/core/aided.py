@@ -507,7 +507,7 @@ def run_aided(
     iw = 0
     while iw < wheel.shape[0] and (wheel[iw, 0] < t_start or (cont and wheel[iw, 0] == t_start)):
         iw += 1
-    t_nhc = -np.inf
+    t_nhc = t_start  # the constraint's next time: every NHC_EVERY s from the start, at the first update after
     gm_g = spec[em.SP_GYRO_GM] > 0.0
     smoothing = store.shape[0] > 0
     acc = np.zeros(ACC_SIZE + NX * NX if smoothing else ACC_SIZE)
@@ -554,7 +554,7 @@ def run_aided(
         if smoothing:
             due = (ig < gnss.shape[0] and gnss[ig, 0] <= tk) or (ib < baro.shape[0] and baro[ib, 0] <= tk) \
                 or (im < mag.shape[0] and mag[im, 0] <= tk) or (iz < static.shape[0] and static[iz, 0] <= tk) \
-                or (iw < wheel.shape[0] and wheel[iw, 0] <= tk) or (nhc_sigma > 0.0 and tk - t_nhc >= NHC_EVERY)
+                or (iw < wheel.shape[0] and wheel[iw, 0] <= tk) or (nhc_sigma > 0.0 and tk >= t_nhc)
             epoch = due or n_out == 0 or (acc[12] == 0.0 and tk - t_ep >= smooth_dt)
             if epoch:
                 _propagate(s, cfg, spec, P, acc, GEOGRAPHIC)  # P^- at tk: nothing pending
@@ -615,14 +615,15 @@ def run_aided(
                 kept = ok
             keep_or_undo(kept, P, acc, P0, acc0)
             iw += 1
-        if nhc_sigma > 0.0 and tk - t_nhc >= NHC_EVERY:
+        if nhc_sigma > 0.0 and tk >= t_nhc:
             P0, acc0 = P.copy(), acc.copy()
             _propagate(s, cfg, spec, P, acc, GEOGRAPHIC)
             nu, H, R = kf.nhc(s, nhc_sigma)
             nis, ratio, ok = kf.apply_update(s, cfg, bias, P, H, nu, R, gate, kf.ALL)
             n_log = _record(log, n_log, counts, tk, K_NHC, 2, nis, ratio, ok)
             keep_or_undo(ok, P, acc, P0, acc0)
-            t_nhc = tk
+            while t_nhc <= tk:
+                t_nhc += NHC_EVERY
         while iz < static.shape[0] and static[iz, 0] <= tk:
             if tk <= static[iz, 1]:
                 P0, acc0 = P.copy(), acc.copy()

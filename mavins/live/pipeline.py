@@ -172,6 +172,9 @@ class Pipeline:
                 if self._outputs % 50 == 1:
                     counts = {f"rejected_{k}": v for k, v in self.ingest.rejected.items()}
                     counts.update({k: v for k, v in self.engine.counters.items() if v})
+                    # measurements accepted and rejected by kind (the filter's), and the pipeline's own
+                    counts.update({k: v for k, v in self.engine.filter.counters.items() if v})
+                    counts.update({k: v for k, v in self.counters.items() if v})
                     if counts:
                         rec.on_counters(float(r[0]), counts)
         return out

@@ -662,7 +662,7 @@ def measurement_jacobian_check(measure, dx: np.ndarray, tol: float) -> None:
     np.testing.assert_allclose(d, H[:, :9] @ dx[:9], atol=tol)
 
 
-@pytest.mark.parametrize("which", ["pos", "vel", "baro", "yaw", "mag", "zupt", "nhc"])
+@pytest.mark.parametrize("which", ["pos", "vel", "baro", "yaw", "mag", "zupt", "nhc", "wheel"])
 def test_measurement_models_linearise_the_measurement(which: str) -> None:
     """Each measurement's H against the change of its innovation under an injected error (phi 1 mrad, dv, dp).
 
@@ -709,6 +709,26 @@ def test_measurement_models_linearise_the_measurement(which: str) -> None:
         def measure(s):
             return kf.nhc(s, 0.1)
         tol = 7e-4  # second order: |phi| |dv| = 2.7e-3 x 0.23 m/s and |phi|^2 |v| / 2 = 3e-5 m/s
+    elif which == "wheel":
+        bias = np.zeros(kf.B_SIZE)
+        bias[kf.B_WS] = 0.02
+
+        def measure(s, w=w, bias=bias):
+            return kf.wheel_speed(s, bias, 8.3, w, lever, 0.0, 0.02, 0.05)
+        tol = 7e-4  # as nhc's: the same body velocity, row x, times 1.02
+        # a gyro bias error db (estimate - truth) lowers the compensated rate by db; a scale-factor error dk
+        # (estimate - truth) scales the prediction by 1 + dk: both exactly linear
+        ref = moving_state()
+        nu0, H, _ = measure(ref)
+        db = np.array([1e-3, -2e-3, 3e-3])
+        np.testing.assert_allclose(measure(ref, w - db)[0] - nu0, H[:, em.X_BG:em.X_BG + 3] @ db, atol=1e-15)
+        np.testing.assert_array_equal(H[:, em.X_BG:em.X_BG + 3], H[:, em.X_GG:em.X_GG + 3])
+        b2 = bias.copy()
+        b2[kf.B_WS] += 0.01
+        np.testing.assert_allclose(measure(ref, w, b2)[0] - nu0, H[:, em.X_WS] * 0.01, rtol=1e-12)
+        # the speed at the axle centre: C^T v along x plus (w x l)_x, times 1 + k, less the measured one
+        v_b = ref[sd.S_C:sd.S_C + 9].reshape(3, 3).T @ ref[sd.S_V:sd.S_V + 3]
+        assert nu0[0] == pytest.approx(1.02 * (v_b[0] + np.cross(w, lever)[0]) - 8.3, rel=1e-14)
     else:
         def measure(s):
             return kf.zupt(s, 0.01)

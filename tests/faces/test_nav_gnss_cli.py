@@ -363,7 +363,8 @@ def test_smooth_writes_the_smoothed_solution_in_the_same_columns(flight: Path, t
 
 
 @pytest.mark.parametrize("extra, said", [
-    ((), "mavins nav: error: --smooth smooths the aided solution: give --gnss, --baro, --mag or --rest"),
+    ((), "mavins nav: error: --smooth smooths the aided solution: give --gnss, --baro, --mag, --rest, --wheel or "
+         "--nhc"),
     (("--each",), "mavins nav: error: --each navigates free inertial; --smooth cannot go with it"),
 ])
 def test_smooth_without_a_filter_is_refused_in_one_line(sim: Path, tmp_path: Path, extra: tuple, said: str) -> None:
@@ -371,3 +372,43 @@ def test_smooth_without_a_filter_is_refused_in_one_line(sim: Path, tmp_path: Pat
     code, err = run("nav", sim / "imu.csv", "--init", sim / "init.json", "-o", out, "--smooth", *extra)
     assert code == 2 and err.strip() == said
     assert not out.exists()
+
+
+def test_sim_car_writes_odometry_and_nav_fuses_it_with_the_constraint(tmp_path: Path) -> None:
+    """``mavins sim car`` writes wheel.csv (10 Hz, t,speed,sigma); ``mavins nav --wheel --nhc`` through a 60 s
+    cut of the fixes accepts every speed and constraint, writes the odometer's scale factor (ws, ppm) and its
+    sigma after the contract's columns, finds the simulator's 1 % within 3 sigma, and ends the gap with a
+    fifth of the horizontal error that the fixes alone leave."""
+    code, err = run("sim", "car", "--grade", "industrial", "--seed", "4", "--gnss-rate", "5", "--gnss-outage",
+                    "60,120", "-o", tmp_path / "car")
+    assert code == 0, err
+    head, wheel = _table(tmp_path / "car" / "wheel.csv")
+    assert head == ["t", "speed", "sigma"] and np.allclose(np.diff(wheel[:, 0]), 0.1)
+    ends = {}
+    for name, extra in (("gnss", ()), ("odo", ("--wheel", tmp_path / "car" / "wheel.csv", "--nhc"))):
+        code, err = run("nav", tmp_path / "car" / "imu.csv", "--init", tmp_path / "car" / "init.json", "-o",
+                        tmp_path / f"{name}.csv", "--gnss", tmp_path / "car" / "gnss.csv", "--grade", "industrial",
+                        *extra)
+        assert code == 0, err
+        header, nav = _table(tmp_path / f"{name}.csv")
+        e, _ = _horizontal_errors(tmp_path / "car", nav, header)
+        ends[name] = float(np.hypot(*e[int(np.searchsorted(nav[:, 0], 120.0)) - 1]))
+        if name == "odo":
+            assert header == SOLUTION + FILTER + ["ws", "sigma_ws"]
+            assert f"mavins nav: wheel: {wheel.shape[0]} accepted, 0 rejected" in err, err
+            assert re.search(r"mavins nav: nhc: \d+ accepted, 0 rejected", err), err
+            ws, sig = nav[-1, header.index("ws")], nav[-1, header.index("sigma_ws")]
+            assert abs(ws - 1e4) < 3.0 * sig and 0.0 < sig < 1e3, (ws, sig)  # ppm: the simulator's 1 %
+    assert ends["odo"] < ends["gnss"] / 5.0, ends
+
+
+@pytest.mark.parametrize("content, said", [
+    ("t,speed,sigma\n1.0,3.0,0\n", "line 2, column 'sigma': must be positive (m/s), got 0.0"),
+    ("t,speed\n1.0,abc\n", "abc"),
+])
+def test_a_bad_wheel_file_is_one_line_and_no_output(sim: Path, tmp_path: Path, content: str, said: str) -> None:
+    bad = tmp_path / "wheel.csv"
+    bad.write_text(content)
+    code, err = run("nav", sim / "imu.csv", "--init", sim / "init.json", "-o", tmp_path / "nav.csv", "--wheel", bad)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and said in err, err
+    assert not (tmp_path / "nav.csv").exists()
