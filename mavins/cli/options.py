@@ -68,7 +68,7 @@ SYSID = (1, 255)
 HEADING_WORDS = ("auto", "gyrocompass", "mag", "vehicle")  # engine.HEADING_WORDS (not imported: --help stays light)
 
 
-AIDING_WORDS = ("gnss", "baro", "mag", "zupt", "nhc")  # aiding.AIDING_KINDS, likewise
+AIDING_WORDS = ("gnss", "baro", "mag", "zupt", "nhc", "wheel")  # aiding.AIDING_KINDS, likewise
 
 
 class _Heading:

@@ -93,7 +93,7 @@ def vel_var(var):
 
 def test_unknown_aiding_kind_is_refused_naming_the_kinds() -> None:
     """Each kind is checked, not only the first; the message lists AIDING_KINDS (docs/filter.md) and the bad one."""
-    msg = r"^aiding kinds are gnss, baro, mag, zupt, nhc \(or none\), got 'lidar'$"
+    msg = r"^aiding kinds are gnss, baro, mag, zupt, nhc, wheel \(or none\), got 'lidar'$"
     with pytest.raises(ValueError, match=msg):
         LiveFilter(FilterSettings(aiding=("lidar",)))
     with pytest.raises(ValueError, match=msg):
@@ -103,11 +103,11 @@ def test_unknown_aiding_kind_is_refused_naming_the_kinds() -> None:
 
 
 def test_a_new_filter_holds_zeros_and_nothing_seen() -> None:
-    """Before start: P 43 x 43 zero, the 34 sensor-error estimates zero, no ratios, nothing aided, no glitch, no
+    """Before start: P 44 x 44 zero, the 35 sensor-error estimates zero, no ratios, nothing aided, no glitch, no
     resets; the spec is the settings' (60 deg/sqrt(h) = pi/180 rad/sqrt(s)); the lever arm as floats."""
     f = LiveFilter(FilterSettings(spec={"gyro_arw": 60.0}, lever_arm=(1, -2, 3)))
-    assert f.P.shape == (em.NX, em.NX) == (43, 43) and not f.P.any()
-    assert f.bias.shape == (kf.B_SIZE,) == (34,) and not f.bias.any()
+    assert f.P.shape == (em.NX, em.NX) == (44, 44) and not f.P.any()
+    assert f.bias.shape == (kf.B_SIZE,) == (35,) and not f.bias.any()
     assert f.acc.shape == (19,) and not f.acc.any() and f.sums.shape == (7,) and not f.sums.any()
     assert f.predict_every == 1 and f.resets == 0 and f.ratios == {} and not f.counters and f.events == []
     assert f.last_pos_t == -math.inf and f.last_hgt_t == -math.inf
@@ -203,7 +203,7 @@ def test_start_sets_the_bias_and_clears_the_sums() -> None:
     f.acc[:] = 1.0
     f.sums[:] = 1.0
     f.start(s, CFG, np.array([1e-3, -2e-3, 4e-3]), 0.01)
-    np.testing.assert_array_equal(f.bias, [1e-3, -2e-3, 4e-3] + [0.0] * 31)
+    np.testing.assert_array_equal(f.bias, [1e-3, -2e-3, 4e-3] + [0.0] * (kf.B_SIZE - 3))
     np.testing.assert_array_equal(f.gyro_bias, [1e-3, -2e-3, 4e-3])
     np.testing.assert_array_equal(f.accel_bias, 0.0)
     assert not f.acc.any()
@@ -414,7 +414,7 @@ def test_bias_estimates_are_the_sums_of_their_parts() -> None:
     """gyro_bias = constant + Gauss-Markov part, accel_bias likewise (errmodel.py), and body_rate is the raw rate
     minus the gyro's: binary-exact values."""
     f = LiveFilter(FilterSettings(spec={}))
-    f.bias[:] = [1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 0.5, 0.25, 0.125, 64.0, 128.0, 256.0, 1024.0] + [0.0] * 21
+    f.bias[:] = [1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 0.5, 0.25, 0.125, 64.0, 128.0, 256.0, 1024.0] + [0.0] * (kf.B_SIZE - 13)
     np.testing.assert_array_equal(f.gyro_bias, [1.5, 2.25, 4.125])
     np.testing.assert_array_equal(f.accel_bias, [72.0, 144.0, 288.0])
     assert f.body_rate((3.0, -1.0, 8.0)) == (1.5, -3.25, 3.875)
@@ -547,14 +547,14 @@ def test_resets_count_horizontal_corrections_above_one_metre() -> None:
     s = state()
     f = live(s, p=pos_var(4.0))
     f.measure(s, CFG, T0, "gnss", *fix(1.8), None, 2.0, 2.0, 0.3)
-    f.P[:] = np.diag([0.0] * 6 + [4.0] * 3 + [0.0] * 34)
+    f.P[:] = np.diag([0.0] * 6 + [4.0] * 3 + [0.0] * (em.NX - 9))
     f.measure(s, CFG, T0, "gnss", *fix(0.9, 0.0, 4.0), None, 2.0, 2.0, 0.3)
     assert f.resets == 0
     np.testing.assert_allclose(offset(s), [0.9, 0.0, 2.0], rtol=0, atol=1e-8)
-    f.P[:] = np.diag([0.0] * 6 + [4.0] * 3 + [0.0] * 34)
+    f.P[:] = np.diag([0.0] * 6 + [4.0] * 3 + [0.0] * (em.NX - 9))
     f.measure(s, CFG, T0, "gnss", *fix(0.9, 2.2, 2.0), None, 2.0, 2.0, 0.3)
     assert f.resets == 1
-    f.P[:] = np.diag([0.0] * 6 + [4.0] * 3 + [0.0] * 34)
+    f.P[:] = np.diag([0.0] * 6 + [4.0] * 3 + [0.0] * (em.NX - 9))
     f.measure(s, CFG, T0, "gnss", *fix(3.9, 1.1, 2.0), None, 2.0, 2.0, 0.3)  # 1.5 m north
     assert f.resets == 2
     assert f.uncertainty(T0, 2).resets == 4
@@ -595,7 +595,7 @@ def test_late_gnss_velocity_is_interpolated_over_the_last_attitude_interval() ->
     for t in (T0 + 0.01, T0 + 0.02):
         assert f.push(s, CFG, t, (0.0, 0.0, 0.0), (2.0, 0.0, -G)) == 1
     np.testing.assert_allclose(velocity(s), [0.04, 0.0, 0.0], rtol=0, atol=1e-12)
-    f.P[:] = np.diag([0.0] * 3 + [0.01] * 3 + [0.0] * 37)
+    f.P[:] = np.diag([0.0] * 3 + [0.01] * 3 + [0.0] * (em.NX - 6))
     f.measure(s, CFG, T0 + 0.015, "gnss", *fix(), (0.03, 0.0, 0.0), 100.0, 100.0, 0.1)
     np.testing.assert_allclose(velocity(s), [0.04, 0.0, 0.0], rtol=0, atol=1e-9)
 

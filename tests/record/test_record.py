@@ -169,6 +169,14 @@ def test_demo_entities_and_blueprint(demo) -> None:  # type: ignore[no-untyped-d
     assert "wall_time" in rrd.table("/imu/gyro").schema.names
 
 
+def test_demo_records_the_filters_counts(demo) -> None:  # type: ignore[no-untyped-def]
+    """The measurements accepted by kind (the filter's counters) are recorded beside the rejections, about once
+    a second: the demo's GNSS fixes under /health/counts/gnss_pos_accepted, rising."""
+    _, rrd, _ = demo
+    n = rrd.temporal("/health/counts/gnss_pos_accepted")
+    assert n > 2, sorted(e for e in rrd.entities() if e.startswith("/health/counts"))
+
+
 def test_demo_rows_match_samples_and_outputs(demo) -> None:  # type: ignore[no-untyped-def]
     report, rrd, _ = demo
     accepted = report.summary.counters["imu_accepted"]
