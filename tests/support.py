@@ -399,23 +399,29 @@ def mag_by_hand(tans: list[float], p0: float, r: float, nu: float) -> tuple[floa
 
 
 # --- the live engine fed a simulated run in this process ------------------------------------------------------
-def feed_engine(engine, run, gnss: np.ndarray, each_fix=None, row=None, wheel=None) -> list:  # type: ignore[no-untyped-def]
+def feed_engine(engine, run, gnss: np.ndarray, each_fix=None, row=None, wheel=None,  # type: ignore[no-untyped-def]
+                vision=None) -> list:
     """Feed ``engine`` (mavins.live.engine.Engine) the run's IMU samples (sim.generate.SimRun, its rates) and the
     GNSS rows ``gnss`` (sim.aiding.simulate_aiding's columns: horizontal velocity only, as GPS_RAW_INT gives)
     at their times, each fix before the first sample after it; ``each_fix(engine, j, fix_row)`` runs after
     each fix (e.g. its dual-antenna heading); ``wheel`` rows (sim.aiding.wheel: t, speed, sigma) go to
-    ``engine.on_wheel`` likewise. Returns ``row(solution)`` for every output set (default: the solution row)."""
+    ``engine.on_wheel`` likewise, and ``vision`` rows (t, vn, ve, vd, sigma: m/s) to ``engine.on_vision_velocity``.
+    Returns ``row(solution)`` for every output set (default: the solution row)."""
     import math as _math
 
     from mavins.core.records import ImuSample
 
     w, f = run.rates()
-    out, j, k = [], 0, 0
+    out, j, k, m = [], 0, 0, 0
     wheel = np.zeros((0, 3)) if wheel is None else wheel
+    vision = np.zeros((0, 5)) if vision is None else vision
     for i, t in enumerate(run.t.tolist()):
         while k < len(wheel) and wheel[k, 0] <= t:
             engine.on_wheel(float(wheel[k, 0]), float(wheel[k, 1]), float(wheel[k, 2]))
             k += 1
+        while m < len(vision) and vision[m, 0] <= t:
+            engine.on_vision_velocity(float(vision[m, 0]), tuple(vision[m, 1:4].tolist()), float(vision[m, 4]), False)
+            m += 1
         while j < len(gnss) and gnss[j, 0] <= t:
             r = gnss[j].tolist()
             engine.on_gnss(r[0], r[1], r[2], r[3], (r[4], r[5], _math.nan), r[7], r[8], r[9])

@@ -68,7 +68,7 @@ SYSID = (1, 255)
 HEADING_WORDS = ("auto", "gyrocompass", "mag", "vehicle")  # engine.HEADING_WORDS (not imported: --help stays light)
 
 
-AIDING_WORDS = ("gnss", "baro", "mag", "zupt", "nhc", "wheel")  # aiding.AIDING_KINDS, likewise
+AIDING_WORDS = ("gnss", "baro", "mag", "zupt", "nhc", "wheel", "vision")  # aiding.AIDING_KINDS, likewise
 
 
 class _Heading:
@@ -178,7 +178,7 @@ def _filter_options(g: argparse._ArgumentGroup, with_aiding: bool = True) -> Non
     """The error-state filter's options (docs/conventions.md "Aided navigation")."""
     if with_aiding:
         g.add_argument("--aiding", type=_Aiding(), default="gnss,baro,mag", metavar="KINDS",
-                       help="comma list of gnss,baro,mag,zupt,nhc,wheel to use from the stream (nhc: the non-holonomic constraint of a wheeled vehicle; wheel: WHEEL_DISTANCE odometry), or none (free inertial)")
+                       help="comma list of gnss,baro,mag,zupt,nhc,wheel,vision to use from the stream (nhc: the non-holonomic constraint of a wheeled vehicle; wheel: WHEEL_DISTANCE odometry; vision: the velocity of VISION_SPEED_ESTIMATE and ODOMETRY from a camera or motion capture), or none (free inertial)")
     g.add_argument("--grade", choices=GRADES, default="consumer",
                    help="the filter's IMU error model: the simulator's grade figures")
     g.add_argument("--imu-spec", type=Path, metavar="SPEC.toml",

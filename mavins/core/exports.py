@@ -54,6 +54,7 @@ EXPORTS = (
     Export("aided", "apply_mag", f"Tuple((i8, f8, f8))({V}, {V}, {V}, {M}, {V}, {V}, {V}, f8, f8, f8, f8, f8, f8, f8, {V})"),
     Export("kalman", "zupt", f"{MEASUREMENT}({V}, f8)"),
     Export("kalman", "nhc", f"{MEASUREMENT}({V}, f8)"),
+    Export("kalman", "body_velocity", f"{MEASUREMENT}({V}, {V}, {V})"),
     Export("kalman", "wheel_speed", f"{MEASUREMENT}({V}, {V}, f8, {V}, {V}, f8, f8, f8)"),
     Export("kalman", "heading", f"{MEASUREMENT}({V}, f8, f8)"),
     Export("kalman", "yaw_reset", f"none({V}, {V}, {V}, {M}, f8, f8, f8, f8, f8, f8, f8, f8)"),

@@ -662,6 +662,30 @@ def nhc(s: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray
 
 
 @kernel
+def body_velocity(s: np.ndarray, v_b: np.ndarray, sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A velocity measured in the body frame (m/s, FRD; a visual-inertial camera's or a motion-capture system's
+    ODOMETRY in its child frame BODY_FRD), 1-sigma per axis ``sigma`` (m/s). Predicted ``C^T v``; its rows are
+    :func:`nhc`'s for all three axes (``dv_b = C^T dv + C^T [v x] phi``); the innovation is predicted minus
+    measured (Groves 2nd ed., section 16.4.1, the same body-frame velocity measurement)."""
+    c = s[sd.S_C:sd.S_C + 9]
+    v0, v1, v2 = s[sd.S_V], s[sd.S_V + 1], s[sd.S_V + 2]
+    nu = np.empty(3)
+    H = np.zeros((3, NX))
+    R = np.zeros((3, 3))
+    for a in range(3):
+        c0, c1, c2 = c[a], c[3 + a], c[6 + a]  # column a of C: row a of C^T
+        nu[a] = c0 * v0 + c1 * v1 + c2 * v2 - v_b[a]
+        H[a, X_DV] = c0
+        H[a, X_DV + 1] = c1
+        H[a, X_DV + 2] = c2
+        H[a, X_PHI] = c1 * v2 - c2 * v1
+        H[a, X_PHI + 1] = c2 * v0 - c0 * v2
+        H[a, X_PHI + 2] = c0 * v1 - c1 * v0
+        R[a, a] = sigma[a] * sigma[a]
+    return nu, H, R
+
+
+@kernel
 def wheel_speed(s: np.ndarray, bias: np.ndarray, speed: float, w_ib: np.ndarray, lever: np.ndarray, dt: float,
                 T: float, sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Wheel odometry: the forward speed ``speed`` (m/s, along body x) measured ``dt`` s before the solution

@@ -503,6 +503,14 @@ class Engine:
             self.filter.measure(self._s, self._kcfg, sd.state_time(self._s) if t is None else t, "wheel", speed,
                                 sigma)
 
+    def on_vision_velocity(self, t: float | None, vel: tuple[float, float, float], sigma: float | tuple,
+                           body: bool) -> None:
+        """A velocity from a camera or motion capture (m/s): NED with one 1-sigma (m/s), or with ``body`` in
+        the body frame FRD with a 1-sigma per axis; measured at t."""
+        if self.state is State.NAVIGATING and self._s is not None:
+            self.filter.measure(self._s, self._kcfg, sd.state_time(self._s) if t is None else t,
+                                "vision_body" if body else "vision_vel", vel, sigma)
+
     def _output_due(self, t: float) -> bool:
         """One output set each time sensor time crosses a multiple of 1/rate (docs/conventions.md
         ``--rate``): on the first attitude update at or after it. An update interval that

@@ -25,7 +25,7 @@ from ..core.jit import for_frame
 from ..core.records import Uncertainty
 from .smoothing import EpochLog
 
-AIDING_KINDS = ("gnss", "baro", "mag", "zupt", "nhc", "wheel")
+AIDING_KINDS = ("gnss", "baro", "mag", "zupt", "nhc", "wheel", "vision")
 ABS_TIMEOUT_S = 5.0  # s of sensor time after the last accepted fix during which position counts as absolute
 GNSS_LOST_S = 3.0  # s without an accepted fix after which GNSS is reported lost
 JUMP_M = 1.0  # m: an accepted position correction above this is a discontinuity (reset_counter)
@@ -230,7 +230,7 @@ class LiveFilter:
         sigma), ``mag`` (m_b body), ``zupt`` (). A kind with a delay
         (``--gnss-delay`` ...) was measured that long before t_m and is fused at that time: taken back
         along the solution like any measurement older than the last attitude update (kalman.py)."""
-        aid = "gnss" if kind == "gnss_yaw" else kind  # a dual-antenna heading comes with GNSS aiding
+        aid = {"gnss_yaw": "gnss", "vision_vel": "vision", "vision_body": "vision"}.get(kind, kind)
         if aid not in self.settings.aiding:
             return
         t_m -= self.settings.delays.get(aid, 0.0)
@@ -314,6 +314,14 @@ class LiveFilter:
             speed, sigma = args
             self._update(s, cfg, "wheel", ("vel",), kalman.wheel_speed(
                 s, self.bias, speed, np.array(self._w_ib), self.wheel_lever, late, self._T_k, sigma))
+        elif kind == "vision_vel":  # a camera's or motion capture's velocity, NED (m/s), its 1-sigma (m/s)
+            vel, sigma = args
+            self._update(s, cfg, "vision_vel", ("vel",), kalman.gnss_velocity(
+                s, np.asarray(vel, dtype=float), np.array(self._w_ib), np.zeros(3), late, self._T_k, sigma))
+        elif kind == "vision_body":  # the same in the body frame (ODOMETRY's child frame BODY_FRD), sigma per axis
+            vel, sigma = args
+            self._update(s, cfg, "vision_vel", ("vel",), kalman.body_velocity(
+                s, np.asarray(vel, dtype=float), np.asarray(sigma, dtype=float)))
         elif kind == "nhc":  # a wheeled vehicle: no sideways and no vertical body velocity
             self._update(s, cfg, "nhc", ("vel",), kalman.nhc(s, self.settings.sigma_nhc))
 

@@ -42,6 +42,8 @@ GNSS_HEIGHT_RANGE = (-1000.0, 50000.0)  # m, ellipsoidal: below the Dead Sea's s
 GNSS_MAX_SPEED = 600.0  # m/s horizontal: above the receivers' export limit (1,000 knots, 514 m/s)
 GPS_FIX_3D, GPS_FIX_PPP = 3, 8  # GPS_FIX_TYPE: 3D fix .. PPP are fixes; other values carry no fix
 WHEEL_MAX_GAP_S = 1.0  # s: two WHEEL_DISTANCE messages further apart give no speed (a gap, counted)
+VISION_SIGMA_VEL = 0.1  # m/s: a camera's velocity without a covariance (docs/filter.md)
+VISION_NED_FRAMES = (mavlink.MAV_FRAME_LOCAL_NED,)  # ODOMETRY velocity frames taken as NED
 
 
 @dataclass
@@ -59,6 +61,7 @@ class Pipeline:
     _outputs: int = 0
     imuset: ImuSet | None = field(init=False, default=None)
     _wheel: tuple[float, float, int] | None = None  # the last WHEEL_DISTANCE: time (s), mean distance (m), count
+    _vision_reset: int | None = None  # the last reset_counter of a camera's velocity
 
     def __post_init__(self) -> None:
         self.engine = Engine(self.engine_cfg)
@@ -110,6 +113,8 @@ class Pipeline:
         if self.ingest.locked_system is not None and src != self.ingest.locked_system:
             return None
         if msg.get_srcComponent() == self.own_component:  # type: ignore[attr-defined]
+            # our own output come back (a router, a loop in the links): never fused, counted
+            self.counters[f"own_{name.lower()}_ignored"] += 1
             return None
         if name in GNSS_MESSAGES:
             fix = gnss_fix(msg, self.engine_cfg.geoid_height)
@@ -130,6 +135,10 @@ class Pipeline:
                                 BARO_SIGMA_M)
         elif name == "WHEEL_DISTANCE":
             self._wheel_distance(msg)
+        elif name in ("VISION_SPEED_ESTIMATE", "ODOMETRY"):
+            self._vision_velocity(name, msg)
+        elif name == "VISION_POSITION_ESTIMATE":
+            self.counters["vision_position_unused"] += 1  # a local position: not fused yet (docs/filter.md)
         elif name == "SYSTEM_TIME" and msg.time_unix_usec:  # type: ignore[attr-defined]
             self.engine.set_date(msg.time_unix_usec * 1e-6)  # type: ignore[attr-defined]
         elif name == "GLOBAL_POSITION_INT" and (msg.lat or msg.lon):  # type: ignore[attr-defined]
@@ -210,6 +219,44 @@ class Pipeline:
             return
         flt = self.engine_cfg.filter
         self.engine.on_wheel(self._on_imu_clock(t - 0.5 * dt), (dist - prev[1]) / dt, flt.sigma_wheel)
+
+    def _vision_velocity(self, name: str, msg: object) -> None:
+        """VISION_SPEED_ESTIMATE (usec, x y z m/s NED, covariance[9] row-major) or ODOMETRY (time_usec, vx vy vz
+        in ``child_frame_id``: BODY_FRD or LOCAL_NED, velocity_covariance[21], the upper triangle of 6 x 6)
+        as a velocity measurement; a NaN first covariance element means unknown (VISION_SIGMA_VEL). A NED
+        velocity takes the largest of the three sigmas. Another frame is counted
+        ``vision_frame_unsupported``, a non-finite value ``vision_invalid``; a new ``reset_counter`` is
+        counted ``vision_resets`` (it moves a camera's position, not its velocity)."""
+        if name == "ODOMETRY":
+            t, vel = msg.time_usec * 1e-6, (msg.vx, msg.vy, msg.vz)  # type: ignore[attr-defined]
+            cov = msg.velocity_covariance  # type: ignore[attr-defined]
+            var = (cov[0], cov[6], cov[11])
+            frame = msg.child_frame_id  # type: ignore[attr-defined]
+            if frame != mavlink.MAV_FRAME_BODY_FRD and frame not in VISION_NED_FRAMES:
+                self.counters["vision_frame_unsupported"] += 1
+                return
+            body = frame == mavlink.MAV_FRAME_BODY_FRD
+        else:
+            t, vel = msg.usec * 1e-6, (msg.x, msg.y, msg.z)  # type: ignore[attr-defined]
+            cov = msg.covariance  # type: ignore[attr-defined]
+            var = (cov[0], cov[4], cov[8])
+            body = False
+        if not all(math.isfinite(v) for v in vel):
+            self.counters["vision_invalid"] += 1
+            return
+        reset = int(msg.reset_counter)  # type: ignore[attr-defined]
+        if self._vision_reset is not None and reset != self._vision_reset:
+            self.counters["vision_resets"] += 1
+        self._vision_reset = reset
+        if math.isfinite(var[0]):
+            if not all(math.isfinite(v) and v > 0.0 for v in var):
+                self.counters["vision_invalid"] += 1
+                return
+            sig = tuple(math.sqrt(v) for v in var)
+        else:
+            sig = (VISION_SIGMA_VEL,) * 3
+        self.engine.on_vision_velocity(self._on_imu_clock(t), tuple(float(v) for v in vel),  # type: ignore[arg-type]
+                                       sig if body else max(sig), body)
 
     def _on_imu_clock(self, t: float | None) -> float | None:
         """A message's own time if it is on the IMU's clock (within CLOCK_MATCH_S of the last

@@ -662,7 +662,7 @@ def measurement_jacobian_check(measure, dx: np.ndarray, tol: float) -> None:
     np.testing.assert_allclose(d, H[:, :9] @ dx[:9], atol=tol)
 
 
-@pytest.mark.parametrize("which", ["pos", "vel", "baro", "yaw", "mag", "zupt", "nhc", "wheel"])
+@pytest.mark.parametrize("which", ["pos", "vel", "baro", "yaw", "mag", "zupt", "nhc", "wheel", "body"])
 def test_measurement_models_linearise_the_measurement(which: str) -> None:
     """Each measurement's H against the change of its innovation under an injected error (phi 1 mrad, dv, dp).
 
@@ -709,6 +709,18 @@ def test_measurement_models_linearise_the_measurement(which: str) -> None:
         def measure(s):
             return kf.nhc(s, 0.1)
         tol = 7e-4  # second order: |phi| |dv| = 2.7e-3 x 0.23 m/s and |phi|^2 |v| / 2 = 3e-5 m/s
+    elif which == "body":
+        v_b = np.array([5.0, -1.0, 0.3])
+
+        def measure(s):
+            return kf.body_velocity(s, v_b, np.array([0.1, 0.2, 0.3]))
+        tol = 7e-4  # as nhc's
+        ref = moving_state()
+        nu0, H, R = measure(ref)
+        c = ref[sd.S_C:sd.S_C + 9].reshape(3, 3)
+        np.testing.assert_allclose(nu0, c.T @ ref[sd.S_V:sd.S_V + 3] - v_b, rtol=0, atol=1e-14)
+        np.testing.assert_allclose(np.diag(R), [0.01, 0.04, 0.09], rtol=1e-15)
+        np.testing.assert_array_equal(H[1:3], kf.nhc(ref, 0.1)[1])  # the constraint's rows are its y and z
     elif which == "wheel":
         bias = np.zeros(kf.B_SIZE)
         bias[kf.B_WS] = 0.02
