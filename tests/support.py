@@ -399,6 +399,19 @@ def mag_by_hand(tans: list[float], p0: float, r: float, nu: float) -> tuple[floa
 
 
 # --- the live engine fed a simulated run in this process ------------------------------------------------------
+def horizontal_errors(rows: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """North and east errors (m) of rows ``t, lat, lon (rad), ...`` against the truth row (sim file units) at or
+    after each row's time, through the WGS-84 radii of curvature at the truth's latitude and height."""
+    k = np.clip(np.searchsorted(truth[:, 0], rows[:, 0]), 0, len(truth) - 1)
+    lat = np.radians(truth[k, 1])
+    e2 = F * (2.0 - F)
+    r_n = A * (1 - e2) / (1 - e2 * np.sin(lat) ** 2) ** 1.5
+    r_e = A / np.sqrt(1 - e2 * np.sin(lat) ** 2)
+    h = truth[k, 3]
+    return np.column_stack([(rows[:, 1] - lat) * (r_n + h),
+                            (rows[:, 2] - np.radians(truth[k, 2])) * (r_e + h) * np.cos(lat)])
+
+
 def feed_engine(engine, run, gnss: np.ndarray, each_fix=None, row=None, wheel=None,  # type: ignore[no-untyped-def]
                 vision=None) -> list:
     """Feed ``engine`` (mavins.live.engine.Engine) the run's IMU samples (sim.generate.SimRun, its rates) and the

@@ -637,19 +637,36 @@ def mag_heading(
 @kernel
 def nhc(s: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Non-holonomic constraint of a wheeled vehicle: no sideways and no vertical velocity in the body frame
-    (sigma m/s each). With ``v_b = C^T v`` and ``C(true) = (I - [phi x]) C(est)``, the estimate's error is
-    ``dv_b = C^T dv + C^T [v x] phi`` (first order), so the rows y and z of ``C^T`` (on dv) and of
-    ``C^T [v x]`` (on phi) are H; the innovation (predicted minus measured) is ``v_b`` y and z itself
-    (Groves 2nd ed., section 16.4.1, context-based constraints; Shin's motion constraints of a land vehicle)."""
+    (sigma m/s each): :func:`body_velocity`'s rows y and z with 0 measured (Groves 2nd ed., section 16.4.1,
+    context-based constraints; Shin's motion constraints of a land vehicle)."""
+    return _body_rows(s, 1, np.zeros(3), np.full(3, sigma))
+
+
+@kernel
+def body_velocity(s: np.ndarray, v_b: np.ndarray, sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A velocity measured in the body frame (m/s, FRD; a visual-inertial camera's or a motion-capture system's
+    ODOMETRY in its child frame BODY_FRD), 1-sigma per axis ``sigma`` (m/s) (:func:`_body_rows`, all three
+    axes; Groves 2nd ed., section 16.4.1, the same body-frame velocity measurement)."""
+    return _body_rows(s, 0, v_b, sigma)
+
+
+@kernel
+def _body_rows(s: np.ndarray, first: int, v_b: np.ndarray, sigma: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The body-frame velocity's rows from axis ``first`` (0 x, 1 y) to z: predicted ``v_b = C^T v``, measured
+    ``v_b[a]`` with 1-sigma ``sigma[a]``. With ``C(true) = (I - [phi x]) C(est)`` the estimate's error is
+    ``dv_b = C^T dv + C^T [v x] phi`` (first order): the rows of ``C^T`` (on dv) and of ``C^T [v x]`` (on phi)
+    are H; the innovation is predicted minus measured."""
     c = s[sd.S_C:sd.S_C + 9]
     v0, v1, v2 = s[sd.S_V], s[sd.S_V + 1], s[sd.S_V + 2]
-    nu = np.empty(2)
-    H = np.zeros((2, NX))
-    R = np.zeros((2, 2))
-    for r in range(2):
-        a = r + 1  # body y, then z
+    n = 3 - first
+    nu = np.empty(n)
+    H = np.zeros((n, NX))
+    R = np.zeros((n, n))
+    for r in range(n):
+        a = first + r
         c0, c1, c2 = c[a], c[3 + a], c[6 + a]  # column a of C: row a of C^T
-        nu[r] = c0 * v0 + c1 * v1 + c2 * v2
+        nu[r] = c0 * v0 + c1 * v1 + c2 * v2 - v_b[a]
         H[r, X_DV] = c0
         H[r, X_DV + 1] = c1
         H[r, X_DV + 2] = c2
@@ -657,31 +674,7 @@ def nhc(s: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray
         H[r, X_PHI] = c1 * v2 - c2 * v1
         H[r, X_PHI + 1] = c2 * v0 - c0 * v2
         H[r, X_PHI + 2] = c0 * v1 - c1 * v0
-        R[r, r] = sigma * sigma
-    return nu, H, R
-
-
-@kernel
-def body_velocity(s: np.ndarray, v_b: np.ndarray, sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """A velocity measured in the body frame (m/s, FRD; a visual-inertial camera's or a motion-capture system's
-    ODOMETRY in its child frame BODY_FRD), 1-sigma per axis ``sigma`` (m/s). Predicted ``C^T v``; its rows are
-    :func:`nhc`'s for all three axes (``dv_b = C^T dv + C^T [v x] phi``); the innovation is predicted minus
-    measured (Groves 2nd ed., section 16.4.1, the same body-frame velocity measurement)."""
-    c = s[sd.S_C:sd.S_C + 9]
-    v0, v1, v2 = s[sd.S_V], s[sd.S_V + 1], s[sd.S_V + 2]
-    nu = np.empty(3)
-    H = np.zeros((3, NX))
-    R = np.zeros((3, 3))
-    for a in range(3):
-        c0, c1, c2 = c[a], c[3 + a], c[6 + a]  # column a of C: row a of C^T
-        nu[a] = c0 * v0 + c1 * v1 + c2 * v2 - v_b[a]
-        H[a, X_DV] = c0
-        H[a, X_DV + 1] = c1
-        H[a, X_DV + 2] = c2
-        H[a, X_PHI] = c1 * v2 - c2 * v1
-        H[a, X_PHI + 1] = c2 * v0 - c0 * v2
-        H[a, X_PHI + 2] = c0 * v1 - c1 * v0
-        R[a, a] = sigma[a] * sigma[a]
+        R[r, r] = sigma[a] * sigma[a]
     return nu, H, R
 
 

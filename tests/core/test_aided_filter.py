@@ -95,9 +95,9 @@ def test_wilson_hilferty_against_tabulated_quantiles() -> None:
     assert chi2_quantile(Z975, 3) == pytest.approx(9.348, rel=1e-2)
 
 
-def consumer_stochastic() -> errors.ImuErrorModel:
-    """The consumer grade without the errors outside the filter's model."""
-    m = errors.grade("consumer")
+def consumer_stochastic(grade: str = "consumer") -> errors.ImuErrorModel:
+    """The grade (consumer by default) without the errors outside the filter's model."""
+    m = errors.grade(grade)
     zero33 = ((0.0, 0.0, 0.0),) * 3
 
     def strip(s: errors.SensorErrorModel) -> errors.SensorErrorModel:

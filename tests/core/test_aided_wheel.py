@@ -23,7 +23,7 @@ from mavins.core import aided
 from sim import aiding, errors
 from sim.generate import generate
 from sim.scenarios import Scenario, load
-from test_aided_filter import nav_errors, perturbed_init
+from test_aided_filter import consumer_stochastic, nav_errors, perturbed_init
 
 RUNS = 10
 OUTAGE = (60.0, 360.0)
@@ -39,18 +39,7 @@ def chi2_quantile(z: float, k: float) -> float:
     return k * (1.0 - c + z * math.sqrt(c)) ** 3
 
 
-def industrial_stochastic() -> errors.ImuErrorModel:
-    """The industrial grade without the errors outside the filter's default model."""
-    m = errors.grade("industrial")
-    zero33 = ((0.0, 0.0, 0.0),) * 3
-
-    def strip(s: errors.SensorErrorModel) -> errors.SensorErrorModel:
-        return dataclasses.replace(s, scale_factor_ppm=(0.0, 0.0, 0.0), misalignment=zero33)
-
-    return dataclasses.replace(m, gyro=strip(m.gyro), accel=strip(m.accel), g_sensitivity=zero33, drop_probability=0.0)
-
-
-MODEL = industrial_stochastic()
+MODEL = consumer_stochastic("industrial")  # the industrial grade without the errors outside the model
 
 
 @pytest.fixture(scope="module")

@@ -19,21 +19,9 @@ from mavins.live.smoothing import KeptRows
 from sim.aiding import GnssConfig, simulate_aiding
 from sim.generate import generate
 from sim.scenarios import load
-from support import feed_engine
+from support import feed_engine, horizontal_errors
 
 OUTAGE = (60.0, 120.0)
-
-
-def horizontal_errors(rows: np.ndarray, truth: np.ndarray) -> np.ndarray:
-    """North and east errors (m) of kernel rows against the truth row at or after each row's time."""
-    k = np.clip(np.searchsorted(truth[:, 0], rows[:, 0]), 0, len(truth) - 1)
-    lat = np.radians(truth[k, 1])
-    a, e2 = 6378137.0, (1 / 298.257223563) * (2 - 1 / 298.257223563)
-    r_n = a * (1 - e2) / (1 - e2 * np.sin(lat) ** 2) ** 1.5
-    r_e = a / np.sqrt(1 - e2 * np.sin(lat) ** 2)
-    h = truth[k, 3]
-    return np.column_stack([(rows[:, 1] - lat) * (r_n + h),
-                            (rows[:, 2] - np.radians(truth[k, 2])) * (r_e + h) * np.cos(lat)])
 
 
 @pytest.fixture(scope="module")

@@ -17,7 +17,7 @@ from mavins.live.pipeline import WHEEL_MAX_GAP_S, Pipeline
 from sim.aiding import GnssConfig, WheelConfig, simulate_aiding, wheel
 from sim.generate import generate
 from sim.scenarios import load
-from support import feed_engine
+from support import feed_engine, horizontal_errors
 
 OUTAGE = (60.0, 120.0)
 LEVER = (-1.2, 0.5, 0.4)
@@ -63,14 +63,7 @@ def drive(seed: int, aiding: tuple[str, ...]):  # type: ignore[no-untyped-def]
     out = np.array(feed_engine(eng, run, g, row=lambda sol: (sol.row[0], sol.row[1], sol.row[2],
                                                                sol.unc.sigma_pos[0], sol.unc.sigma_pos[1]),
                                wheel=odo))
-    truth = run.exact.truth
-    k = np.clip(np.searchsorted(truth[:, 0], out[:, 0]), 0, len(truth) - 1)
-    lat = np.radians(truth[k, 1])
-    a, e2 = 6378137.0, (1 / 298.257223563) * (2 - 1 / 298.257223563)
-    r_n = a * (1 - e2) / (1 - e2 * np.sin(lat) ** 2) ** 1.5
-    r_e = a / np.sqrt(1 - e2 * np.sin(lat) ** 2)
-    h = truth[k, 3]
-    err = np.column_stack([(out[:, 1] - lat) * (r_n + h), (out[:, 2] - np.radians(truth[k, 2])) * (r_e + h) * np.cos(lat)])
+    err = horizontal_errors(out, run.exact.truth)
     return out[:, 0], err, out[:, 3:5], eng
 
 
