@@ -1036,3 +1036,29 @@ def test_bias_totals_add_the_constant_and_gauss_markov_parts() -> None:
     np.testing.assert_array_equal(kf.gyro_bias_total(bias), bias[kf.B_BG:kf.B_BG + 3] + bias[kf.B_GG:kf.B_GG + 3])
     np.testing.assert_array_equal(kf.accel_bias_total(bias), bias[kf.B_BA:kf.B_BA + 3] + bias[kf.B_GA:kf.B_GA + 3])
     assert kf.B_BG != kf.B_GG and kf.B_BA != kf.B_GA
+
+
+def test_wheel_speed_by_hand() -> None:
+    """Level, heading east (body x = north-east-down (0, 1, 0)), v = (0, 10, 0) m/s now and (0, 9.8, 0) at the
+    update before; a speed measured 0.01 s back over a 0.02 s interval sees v = (0, 9.9, 0); the axle centre at
+    l = (-1, 0.5, 0.3) m with a yaw rate of 0.2 rad/s adds (w x l)_x = -w_z l_y = -0.1 m/s: u = 9.8 m/s, and
+    with a 2 % scale factor the odometer should read 9.996 m/s; it reads 10. H: 1.02 c_0 on dv, nothing on
+    phi (c_0 x v = 0 along the track), (l x db)_x on both gyro-bias parts (-1.02 l_z on y, 1.02 l_y on z), u
+    on the scale factor."""
+    s = sd.init_state(0.0, 0.8, 0.1, 100.0, np.array([0.0, 10.0, 0.0]), 0.0, 0.0, math.pi / 2)
+    s[sd.S_VP:sd.S_VP + 3] = [0.0, 9.8, 0.0]
+    bias = np.zeros(kf.B_SIZE)
+    bias[kf.B_WS] = 0.02
+    nu, H, R = kf.wheel_speed(s, bias, 10.0, np.array([0.0, 0.0, 0.2]), np.array([-1.0, 0.5, 0.3]), 0.01, 0.02,
+                              0.05)
+    assert nu.shape == (1,) and nu[0] == pytest.approx(1.02 * 9.8 - 10.0, abs=1e-12)
+    want = np.zeros(em.NX)
+    want[em.X_DV + 1] = 1.02
+    want[em.X_BG + 1] = want[em.X_GG + 1] = -1.02 * 0.3
+    want[em.X_BG + 2] = want[em.X_GG + 2] = 1.02 * 0.5
+    want[em.X_WS] = 9.8
+    np.testing.assert_allclose(H[0], want, rtol=1e-12, atol=1e-12)
+    assert R.shape == (1, 1) and R[0, 0] == pytest.approx(0.0025, rel=1e-15)
+    nu0, _, _ = kf.wheel_speed(s, bias, 10.0, np.array([0.0, 0.0, 0.2]), np.array([-1.0, 0.5, 0.3]), 0.01, 0.0,
+                               0.05)  # no interval yet: the current velocity
+    assert nu0[0] == pytest.approx(1.02 * 9.9 - 10.0, abs=1e-12)

@@ -225,14 +225,14 @@ def test_correct_solution_moves_a_row_as_feedback_moves_the_state() -> None:
 
 
 def test_smooth_rows_interpolates_between_epochs_and_keeps_the_rows_after_the_last() -> None:
-    """Two epochs at rows 0 and 4 (t 0 and 2 s) over the north position and the x gyro bias: row 2 (t 1 s)
+    """Two epochs at rows 0 and 4 (t 10 and 12 s) over the north position and the x gyro bias: row 2 (t 11 s)
     is corrected by the mean of e^s_0 and e^s_1 + dx_1, its variance the mean of P^s_0 and P^s_1; row 0 by
     e^s_0 with P^s_0; rows 4 and 5 (the last epoch and after) keep the forward values."""
     act = np.array([em.X_DP, em.X_BG])
     na = 2
     store = np.zeros((2, smoother.store_width(na)))
     o_dx, o_e, o_pm, o_pp, o_phi = 2, 4, 6, 10, 14
-    store[:, 0], store[:, 1] = (0.0, 2.0), (0, 4)
+    store[:, 0], store[:, 1] = (10.0, 12.0), (0, 4)
     store[0, o_e:o_e + 2] = (2.0, 1e-4)  # e^s_0: 2 m north, 1e-4 rad/s
     store[1, o_e:o_e + 2] = (0.0, 0.0)
     store[1, o_dx:o_dx + 2] = (4.0, 3e-4)
@@ -240,7 +240,7 @@ def test_smooth_rows_interpolates_between_epochs_and_keeps_the_rows_after_the_la
     store[1, o_pp:o_pp + 4] = (16.0, 0.0, 0.0, 3e-8)
     out = np.zeros((6, aided.ROW_SIZE))
     lat = math.radians(47.0)
-    out[:, 0] = np.arange(6) * 0.5
+    out[:, 0] = 10.0 + np.arange(6) * 0.5
     out[:, 1], out[:, 3], out[:, 10] = lat, 100.0, 1.0  # latitude, height, identity attitude
     out[:, 23] = 5e-4  # forward gyro bias x
     out[:, 29] = 7e-3  # forward sigma_bg_x
@@ -302,11 +302,13 @@ def test_rows_before_the_first_epoch_and_between_epochs_at_one_time() -> None:
     assert out[2, 1] == pytest.approx(lat - 4.0 / r_n, abs=1e-16) and out[2, 14] == 3.0
 
 
-@pytest.mark.parametrize("yaw", [30.0, 179.9])
-def test_correct_solution_keeps_the_scalar_part_non_negative(yaw: float) -> None:
-    """A heading correction across 180 deg: the corrected row's quaternion keeps a non-negative scalar part
-    and its Euler angles, as solution_row writes them for the corrected state."""
-    s = sd.init_state(0.0, math.radians(47.4), math.radians(8.5), 500.0, np.zeros(3), 0.0, 0.0, math.radians(yaw))
+@pytest.mark.parametrize("pitch, yaw", [(0.0, 30.0), (0.0, 179.9), (90.0, 30.0)])
+def test_correct_solution_keeps_the_scalar_part_non_negative(pitch: float, yaw: float) -> None:
+    """A heading correction (across 180 deg; at pitch 90 deg, where the Euler angles take the heading from
+    the DCM's first two columns): the corrected row's quaternion keeps a non-negative scalar part and its
+    Euler angles are those solution_row writes for the corrected state."""
+    s = sd.init_state(0.0, math.radians(47.4), math.radians(8.5), 500.0, np.zeros(3), 0.0, math.radians(pitch),
+                      math.radians(yaw))
     x = np.zeros(NX)
     x[2] = math.radians(-0.5)  # feedback turns the heading by +0.5 deg
     row, want = np.empty(14), np.empty(14)
@@ -337,10 +339,10 @@ def test_scratch_is_a_zeroed_writable_file_backed_array() -> None:
 
 
 def test_epoch_bound_counts_what_can_make_an_epoch() -> None:
-    """Rows of 0.1 s over 10 s; 3 fixes, 2 baro, 1 magnetometer row; two rest windows holding 5 and 0 IMU rows:
-    3 + 2 + 1 + 2 x 2 windows + 2 + 5 + 0 + (10 - 0.1) / 1 + 1 = 27."""
-    t = np.arange(1, 101) * 0.1
+    """Rows of 0.1 s over 10 s; 3 fixes, 2 baro, 1 magnetometer row; two rest windows holding 5 and 0 IMU rows,
+    an epoch every 0.5 s: 3 + 2 + 1 + 2 x 2 windows + 2 + 5 + 0 + 10 / 0.5 + 1 = 38."""
+    t = np.arange(0, 101) * 0.1
     g, b, m = np.zeros((3, 10)), np.zeros((2, 3)), np.zeros((1, 5))
     z = np.array([[1.0, 1.5, 0.0, 0.0], [20.0, 21.0, 0.0, 0.0]])
-    assert aided.epoch_bound(t, g, b, m, z, 1.0) == 3 + 2 + 1 + 4 + 2 + 5 + 0 + 9 + 1
+    assert aided.epoch_bound(t, g, b, m, z, 0.5) == 3 + 2 + 1 + 4 + 2 + 5 + 0 + 20 + 1
     assert aided.epoch_bound(t[:0], g, b, m, z[:0], 1.0) == 3 + 2 + 1 + 2

@@ -129,7 +129,7 @@ def test_kept_rows_smooth_a_constant_and_leave_an_earlier_start_alone() -> None:
 
 def test_kept_rows_without_epochs_are_the_forward_rows() -> None:
     kept = KeptRows()
-    assert kept.smooth(None)[0].shape == (0, aided.ROW_SIZE)
+    assert kept.smooth(None)[0].shape == (0, aided.ROW_SIZE) and kept.smooth(None)[1] == 0
     row = np.arange(aided.ROW_SIZE, dtype=float)
     kept.add(row, None)
     rows, singular = kept.smooth(None)

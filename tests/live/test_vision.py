@@ -114,6 +114,7 @@ def fly(seed: int, vision: bool):  # type: ignore[no-untyped-def]
     return math.hypot(dn, de), eng
 
 
+@pytest.mark.plain_python_slow  # the flight through the engine: minutes as plain Python (mutation runs)
 def test_a_cameras_velocity_holds_a_gnss_outage() -> None:
     """A minute without fixes: with the camera's velocity the horizontal error at its end is below a fifth of
     the fixes-alone run's (over three seeds, RMS), and every camera velocity was accepted."""

@@ -72,6 +72,7 @@ def drives():  # type: ignore[no-untyped-def]
     return {aiding: [drive(s, aiding) for s in (1, 2, 3)] for aiding in (("gnss",), ("gnss", "nhc", "wheel"))}
 
 
+@pytest.mark.plain_python_slow  # the car through the engine: minutes as plain Python (mutation runs)
 def test_the_odometer_narrows_the_outage_and_learns_its_scale_factor(drives) -> None:  # type: ignore[no-untyped-def]
     """At the end of the minute without fixes the horizontal RMS over the runs with the odometer and the
     constraint is below a fifth of free inertial's (1.6 m against 23 m in this set-up); every odometer speed
