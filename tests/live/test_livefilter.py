@@ -93,7 +93,7 @@ def vel_var(var):
 
 def test_unknown_aiding_kind_is_refused_naming_the_kinds() -> None:
     """Each kind is checked, not only the first; the message lists AIDING_KINDS (docs/filter.md) and the bad one."""
-    msg = r"^aiding kinds are gnss, baro, mag, zupt, nhc, wheel \(or none\), got 'lidar'$"
+    msg = r"^aiding kinds are gnss, baro, mag, zupt, nhc, wheel, vision \(or none\), got 'lidar'$"
     with pytest.raises(ValueError, match=msg):
         LiveFilter(FilterSettings(aiding=("lidar",)))
     with pytest.raises(ValueError, match=msg):
