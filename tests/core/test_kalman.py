@@ -1062,3 +1062,52 @@ def test_wheel_speed_by_hand() -> None:
     nu0, _, _ = kf.wheel_speed(s, bias, 10.0, np.array([0.0, 0.0, 0.2]), np.array([-1.0, 0.5, 0.3]), 0.01, 0.0,
                                0.05)  # no interval yet: the current velocity
     assert nu0[0] == pytest.approx(1.02 * 9.9 - 10.0, abs=1e-12)
+
+
+def body_state() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A state turned every way (roll 15, pitch -10, yaw 120 deg) moving (8, -3, 0.5) m/s, with the velocity
+    of the update before (7.6, -2.8, 0.3): the state, C_b^n (support.cbn, not the kernel's), v and v_prev."""
+    att = [math.radians(x) for x in (15.0, -10.0, 120.0)]
+    v, v_prev = np.array([8.0, -3.0, 0.5]), np.array([7.6, -2.8, 0.3])
+    s = sd.init_state(0.0, 0.8, 0.1, 100.0, v, *att)
+    s[sd.S_VP:sd.S_VP + 3] = v_prev
+    return s, cbn(*att), v, v_prev
+
+
+def test_body_velocity_and_the_constraint_rows_by_hand() -> None:
+    """Predicted C^T v less the measurement, H = [C^T [v x] on phi, C^T on dv] row by row, R the sigmas
+    squared; the constraint is rows y and z with 0 measured and one sigma."""
+    s, c, v, _ = body_state()
+    v_m, sig = np.array([7.0, 1.0, -2.0]), np.array([0.1, 0.2, 0.3])
+    nu, H, R = kf.body_velocity(s, v_m, sig)
+    vx = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+    np.testing.assert_allclose(nu, c.T @ v - v_m, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(H[:, em.X_DV:em.X_DV + 3], c.T, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(H[:, em.X_PHI:em.X_PHI + 3], c.T @ vx, rtol=0, atol=1e-13)
+    assert not H[:, 6:].any()
+    np.testing.assert_allclose(R, np.diag(sig ** 2), rtol=1e-15)
+    nu2, H2, R2 = kf.nhc(s, 0.25)
+    np.testing.assert_allclose(nu2, (c.T @ v)[1:], rtol=0, atol=1e-13)
+    np.testing.assert_array_equal(H2, H[1:])
+    np.testing.assert_allclose(R2, np.diag([0.0625, 0.0625]), rtol=1e-15)
+
+
+def test_wheel_speed_on_a_turned_state_by_hand() -> None:
+    """Every axis in play: v taken back 0.005 s of a 0.02 s interval (a quarter of the change), the rate
+    (0.1, -0.2, 0.3) rad/s at the lever (-1, 0.5, 0.3) m, a 3 % scale factor: the prediction, and H on dv,
+    phi (body x's row of the body velocity's, times 1.03), both gyro biases and the scale factor."""
+    s, c, v, v_prev = body_state()
+    w, lever = np.array([0.1, -0.2, 0.3]), np.array([-1.0, 0.5, 0.3])
+    bias = np.zeros(kf.B_SIZE)
+    bias[kf.B_WS] = 0.03
+    nu, H, _ = kf.wheel_speed(s, bias, 6.0, w, lever, 0.005, 0.02, 0.05)
+    v_t = v - 0.25 * (v - v_prev)
+    u = (c.T @ v_t)[0] + np.cross(w, lever)[0]
+    assert nu[0] == pytest.approx(1.03 * u - 6.0, abs=1e-12)
+    vx = np.array([[0.0, -v_t[2], v_t[1]], [v_t[2], 0.0, -v_t[0]], [-v_t[1], v_t[0], 0.0]])
+    np.testing.assert_allclose(H[0, em.X_DV:em.X_DV + 3], 1.03 * c.T[0], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(H[0, em.X_PHI:em.X_PHI + 3], 1.03 * (c.T @ vx)[0], rtol=0, atol=1e-13)
+    lx = np.array([[0.0, -lever[2], lever[1]], [lever[2], 0.0, -lever[0]], [-lever[1], lever[0], 0.0]])
+    np.testing.assert_allclose(H[0, em.X_BG:em.X_BG + 3], 1.03 * lx[0], rtol=0, atol=1e-15)  # (l x db)_x
+    np.testing.assert_array_equal(H[0, em.X_BG:em.X_BG + 3], H[0, em.X_GG:em.X_GG + 3])
+    assert H[0, em.X_WS] == pytest.approx(u, abs=1e-13)

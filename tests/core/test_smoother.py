@@ -339,10 +339,10 @@ def test_scratch_is_a_zeroed_writable_file_backed_array() -> None:
 
 
 def test_epoch_bound_counts_what_can_make_an_epoch() -> None:
-    """Rows of 0.1 s over 10 s; 3 fixes, 2 baro, 1 magnetometer row; two rest windows holding 5 and 0 IMU rows,
+    """Rows of 0.1 s from 1 to 11 s; 3 fixes, 2 baro, 1 magnetometer row; two rest windows holding 5 and 0 IMU rows,
     an epoch every 0.5 s: 3 + 2 + 1 + 2 x 2 windows + 2 + 5 + 0 + 10 / 0.5 + 1 = 38."""
-    t = np.arange(0, 101) * 0.1
+    t = 1.0 + np.arange(0, 101) * 0.1
     g, b, m = np.zeros((3, 10)), np.zeros((2, 3)), np.zeros((1, 5))
-    z = np.array([[1.0, 1.5, 0.0, 0.0], [20.0, 21.0, 0.0, 0.0]])
+    z = np.array([[2.0, 2.5, 0.0, 0.0], [20.0, 21.0, 0.0, 0.0]])
     assert aided.epoch_bound(t, g, b, m, z, 0.5) == 3 + 2 + 1 + 4 + 2 + 5 + 0 + 20 + 1
     assert aided.epoch_bound(t[:0], g, b, m, z[:0], 1.0) == 3 + 2 + 1 + 2

@@ -78,9 +78,25 @@ def test_vision_messages_become_velocities_with_their_sigmas(pipeline) -> None: 
     p.handle(encoded(lambda e: odometry(e, mavlink.MAV_FRAME_BODY_FRD, (1.0, 2.0, 3.0), -0.01)))
     p.handle(encoded(lambda e: e.vision_position_estimate_encode(3_000_000, 1.0, 2.0, 3.0, 0.0, 0.0, 0.0,
                                                                   [NAN] + [0.0] * 20, 0)))
-    assert len(seen) == 5
+    p.handle(encoded(lambda e: odometry(e, mavlink.MAV_FRAME_LOCAL_FRD, (1.0, 2.0, 3.0))))
+    p.handle(encoded(lambda e: odometry(e, mavlink.MAV_FRAME_BODY_FRD, (1.0, 2.0, 3.0), 0.0)))  # a zero variance
+    p.handle(encoded(lambda e: odometry(e, mavlink.MAV_FRAME_BODY_FRD, (1.0, 2.0, 3.0), 0.01, reset=2)))
+    assert len(seen) == 6
     assert (p.counters["vision_frame_unsupported"], p.counters["vision_invalid"],
-            p.counters["vision_position_unused"]) == (1, 2, 1)
+            p.counters["vision_position_unused"], p.counters["vision_resets"]) == (2, 3, 1, 3)  # resets 0-1-0-2
+
+
+def test_vision_is_stamped_on_the_imu_clock() -> None:
+    """A camera's message stamped within 2 s of the IMU's time keeps its own time (s, from microseconds)."""
+    from mavins.core.records import ImuSample
+
+    p = Pipeline(EngineConfig(filter=FilterSettings(aiding=("vision",))), own_component=OWN)
+    seen: list[tuple] = []
+    p.engine.on_vision_velocity = lambda t, v, s, b: seen.append(t)  # type: ignore[method-assign]
+    p.last_sample = ImuSample(2.5, (0.0, 0.0, 0.0), (0.0, 0.0, -9.8), None, 1, 1)
+    p.handle(encoded(lambda e: odometry(e, mavlink.MAV_FRAME_BODY_FRD, (1.0, 2.0, 3.0))))
+    p.handle(encoded(lambda e: e.vision_speed_estimate_encode(3_000_000, 0.5, -0.5, 0.25, [NAN] + [0.0] * 8, 0)))
+    assert seen == [pytest.approx(2.0, abs=1e-12), pytest.approx(3.0, abs=1e-12)]
 
 
 OUTAGE = (30.0, 90.0)

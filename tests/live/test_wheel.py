@@ -48,6 +48,26 @@ def test_wheel_distance_becomes_the_mean_wheels_speed_at_the_middle_of_its_inter
     assert len(seen) == 1 and p.counters["wheel_gap"] == 3 and p.counters["wheel_invalid"] == 1
     p.handle(wheel_message(2.2, 12.5))  # after the step back: from the last good one (2.1 s), one wheel
     assert len(seen) == 2 and seen[1][1] == pytest.approx(5.0, rel=1e-12)
+    p.handle(wheel_message(2.3, math.nan))  # counted each time
+    p.handle(wheel_message(2.4))  # no wheel
+    assert p.counters["wheel_invalid"] == 3
+
+
+def test_a_wheel_speed_is_stamped_at_the_middle_of_its_interval_on_the_imu_clock() -> None:
+    """With IMU samples arriving the speed is stamped on their clock at the interval's middle (1.25 s for
+    messages at 1.0 and 1.5 s); an interval of exactly WHEEL_MAX_GAP_S is used, 16 wheels (all there are) are
+    averaged."""
+    from mavins.core.records import ImuSample
+
+    p = Pipeline(EngineConfig(filter=FilterSettings(aiding=("wheel",))))
+    seen: list[tuple] = []
+    p.engine.on_wheel = lambda t, speed, sigma: seen.append((t, speed, sigma))  # type: ignore[method-assign]
+    p.last_sample = ImuSample(1.5, (0.0, 0.0, 0.0), (0.0, 0.0, -9.8), None, 1, 1)
+    p.handle(wheel_message(1.0, *([2.0] * 16)))
+    p.handle(wheel_message(1.5, *([3.0] * 15 + [4.6])))
+    p.handle(wheel_message(1.5 + WHEEL_MAX_GAP_S, *([3.0] * 15 + [4.6])))
+    assert [x[0] for x in seen] == [pytest.approx(1.25, abs=1e-9), pytest.approx(1.5 + 0.5 * WHEEL_MAX_GAP_S)]
+    assert seen[0][1] == pytest.approx(1.1 / 0.5, rel=1e-9) and seen[1][1] == 0.0
 
 
 def drive(seed: int, aiding: tuple[str, ...]):  # type: ignore[no-untyped-def]
