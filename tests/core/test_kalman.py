@@ -1100,7 +1100,8 @@ def test_wheel_speed_on_a_turned_state_by_hand() -> None:
     w, lever = np.array([0.1, -0.2, 0.3]), np.array([-1.0, 0.5, 0.3])
     bias = np.zeros(kf.B_SIZE)
     bias[kf.B_WS] = 0.03
-    nu, H, _ = kf.wheel_speed(s, bias, 6.0, w, lever, 0.005, 0.02, 0.05)
+    nu, H, R = kf.wheel_speed(s, bias, 6.0, w, lever, 0.005, 0.02, 0.05)
+    assert nu.shape == (1,) and H.shape == (1, em.NX) and R.shape == (1, 1)
     v_t = v - 0.25 * (v - v_prev)
     u = (c.T @ v_t)[0] + np.cross(w, lever)[0]
     assert nu[0] == pytest.approx(1.03 * u - 6.0, abs=1e-12)

@@ -79,11 +79,12 @@ def test_vision_messages_become_velocities_with_their_sigmas(pipeline) -> None: 
     p.handle(encoded(lambda e: e.vision_position_estimate_encode(3_000_000, 1.0, 2.0, 3.0, 0.0, 0.0, 0.0,
                                                                   [NAN] + [0.0] * 20, 0)))
     p.handle(encoded(lambda e: odometry(e, mavlink.MAV_FRAME_LOCAL_FRD, (1.0, 2.0, 3.0))))
+    p.handle(encoded(lambda e: odometry(e, mavlink.MAV_FRAME_BODY_FRD, (1.0, NAN, 3.0))))  # NaN again: counted
     p.handle(encoded(lambda e: odometry(e, mavlink.MAV_FRAME_BODY_FRD, (1.0, 2.0, 3.0), 0.0)))  # a zero variance
     p.handle(encoded(lambda e: odometry(e, mavlink.MAV_FRAME_BODY_FRD, (1.0, 2.0, 3.0), 0.01, reset=2)))
     assert len(seen) == 6
     assert (p.counters["vision_frame_unsupported"], p.counters["vision_invalid"],
-            p.counters["vision_position_unused"], p.counters["vision_resets"]) == (2, 3, 1, 3)  # resets 0-1-0-2
+            p.counters["vision_position_unused"], p.counters["vision_resets"]) == (2, 4, 1, 3)  # resets 0-1-0-2
 
 
 def test_vision_is_stamped_on_the_imu_clock() -> None:

@@ -51,6 +51,12 @@ def test_wheel_distance_becomes_the_mean_wheels_speed_at_the_middle_of_its_inter
     p.handle(wheel_message(2.3, math.nan))  # counted each time
     p.handle(wheel_message(2.4))  # no wheel
     assert p.counters["wheel_invalid"] == 3
+    p.handle(wheel_message(2.4, 13.0))  # from the last good one (2.2 s): 2.5 m/s
+    p.handle(wheel_message(2.4, 13.5))  # no time between the two: a gap, not a division by zero
+    assert len(seen) == 3 and seen[2][1] == pytest.approx(2.5, rel=1e-9) and p.counters["wheel_gap"] == 4
+    enc, dec = mavlink.MAVLink(None, srcSystem=1, srcComponent=1), mavlink.MAVLink(None)
+    p.handle(dec.parse_char(enc.wheel_distance_encode(2_500_000, 17, [14.0] * 16).pack(enc)))  # more than 16
+    assert p.counters["wheel_invalid"] == 4 and len(seen) == 3
 
 
 def test_a_wheel_speed_is_stamped_at_the_middle_of_its_interval_on_the_imu_clock() -> None:
