@@ -231,7 +231,8 @@ def test_smooth_rows_interpolates_between_epochs_and_keeps_the_rows_after_the_la
     act = np.array([em.X_DP, em.X_BG])
     na = 2
     store = np.zeros((2, smoother.store_width(na)))
-    o_dx, o_e, o_pm, o_pp, o_phi = 2, 4, 6, 10, 14
+    o_dx, o_e, o_pm, o_pp, o_phi = 2, 4, 6, 10, 14  # the module docstring's layout over two states, by hand
+    assert smoother.store_slots(na) == (o_dx, o_e, o_pm, o_pp, o_phi)
     store[:, 0], store[:, 1] = (10.0, 12.0), (0, 4)
     store[0, o_e:o_e + 2] = (2.0, 1e-4)  # e^s_0: 2 m north, 1e-4 rad/s
     store[1, o_e:o_e + 2] = (0.0, 0.0)
