@@ -36,7 +36,7 @@ from typing import Callable, Iterable, Iterator
 import numpy as np
 
 from . import errors
-from .aiding import MagConfig, body_field
+from .aiding import MagConfig, WheelConfig, body_field
 from .generate import SimRun
 from .trajectory import instant_rates
 
@@ -47,6 +47,7 @@ G0 = 9.80665  # ArduPilot's mG scale (m/s^2 per 1000 mG)
 HIGHRES_ACC_GYRO = 0b111111  # fields_updated: x/y/z acc and gyro
 HIGHRES_MAG = 0b111000000  # fields_updated: x/y/z magnetometer
 GAUSS_PER_UT = 0.01
+WHEEL_SCALE = WheelConfig().scale  # the streamed odometer's scale-factor error, as wheel.csv's
 
 
 @dataclass(frozen=True)
@@ -71,6 +72,7 @@ class StreamOptions:
     gnss_heading: float = 0.0  # rad: 1-sigma of a dual-antenna heading in GPS_RAW_INT (yaw, hdg_acc); 0 = none
     mag_rate: float = 0.0  # Hz of magnetometer samples in HIGHRES_IMU id 0 (0 = none)
     mag: MagConfig = MagConfig()  # the field and the sensor's noise
+    wheel_rate: float = 0.0  # Hz of WHEEL_DISTANCE (one wheel at the IMU: the forward distance, 1 % long; 0 = none)
 
 
 @dataclass
@@ -142,6 +144,18 @@ def _piece_frames(run: SimRun, mav: mavlink.MAVLink, opts: StreamOptions, rng: n
     send_att = every("attitude", opts.attitude_rate)
     send_hb = every("heartbeat", 1.0)
     send_mag = every("mag", opts.mag_rate) if opts.mag_rate > 0 and opts.msg == "highres" else np.zeros(len(t), bool)
+    send_wheel = every("wheel", opts.wheel_rate) if opts.wheel_rate > 0 else np.zeros(len(t), bool)
+    if opts.wheel_rate > 0 and len(t):
+        # the forward speed at the IMU: body x in NED (C_b^n's first column from the scalar-first quaternion:
+        # 1 - 2(y^2 + z^2), 2(xy + wz), 2(xz - wy)) dotted with v, integrated over each sample interval
+        qw, qx, qy, qz = (truth[:, 10 + k] for k in range(4))
+        c0 = np.column_stack([1.0 - 2.0 * (qy * qy + qz * qz), 2.0 * (qx * qy + qw * qz), 2.0 * (qx * qz - qw * qy)])
+        u = np.einsum("ki,ki->k", c0, truth[:, 4:7])
+        t0 = last.get("wheel_t")
+        t_prev = np.concatenate(([t[0] if t0 is None else t0], t[:-1]))
+        d0 = last.get("wheel_d")
+        d = (0.0 if d0 is None else d0) + np.cumsum(u * (t - t_prev)) * (1.0 + WHEEL_SCALE)
+        last["wheel_t"], last["wheel_d"] = float(t[-1]), float(d[-1])
     for i in range(len(t)):
         usec = int(round(t[i] * 1e6))
         out: list[mavlink.MAVLink_message] = []
@@ -201,6 +215,8 @@ def _piece_frames(run: SimRun, mav: mavlink.MAVLink, opts: StreamOptions, rng: n
             )))
         while pending and pending[0][0] <= t[i] + 1e-9:  # due (within rounding of the sample grid)
             out.append(mav.gps_raw_int_encode(usec, *pending.pop(0)[1]))
+        if send_wheel[i]:
+            out.append(mav.wheel_distance_encode(usec, 1, [float(d[i])] + [0.0] * 15))
         if send_baro[i]:
             press = 1013.25 * (1 - 2.25577e-5 * row[3]) ** 5.25588 + rng.normal(0.0, 0.012)
             out.append(mav.scaled_pressure_encode(usec // 1000 % (2**32), press, 0.0, 2000, 0))

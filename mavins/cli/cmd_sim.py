@@ -64,7 +64,8 @@ def _add_sim(sub: argparse._SubParsersAction) -> None:
                         "the World Magnetic Model's field at the start on --date, 0.3 uT noise; docs/simulator.md)")
     p.add_argument("--wheel-rate", type=_real(0.0, 100.0), metavar="HZ",
                    help="wheel odometer speeds per second written to wheel.csv (t,speed,sigma: the forward speed with a "
-                        "1 %% scale-factor error and 0.05 m/s noise; 0 = none; default 10 for the car scenario, else 0)")
+                        "1 %% scale-factor error and 0.05 m/s noise), or with --stream WHEEL_DISTANCE messages (one "
+                        "wheel: the distance travelled, 1 %% long); 0 = none; default 10 for the car scenario, else 0")
     p.add_argument("--date", type=_Date(), default=None, metavar="YYYY-MM-DD",
                    help="the date of the simulated magnetic field (or a decimal year); default: today's")
     p.add_argument("--mag-hard-iron", type=_Vec3(), default="0,0,0", metavar="X,Y,Z",
@@ -109,7 +110,7 @@ def _cmd_sim(args: argparse.Namespace) -> int:
 
             outages = (tuple(args.gnss_outage),) if args.gnss_outage else ()
             gnss_on = args.gnss_rate > 0
-            wheel_rate = args.wheel_rate if args.wheel_rate is not None else (10.0 if scenario.name == "car" else 0.0)
+            wheel_rate = _wheel_rate(args, scenario)
             aiding = simulate_aiding(run, GnssConfig(rate=args.gnss_rate, outages=outages) if gnss_on else None,
                                      BaroConfig() if gnss_on else None,
                                      _sim_mag(MagConfig, run, args) if args.mag_rate > 0 else None,
@@ -140,6 +141,7 @@ def _cmd_sim(args: argparse.Namespace) -> int:
                                          imus=args.imus, seed=args.seed, gnss_outages=outages,
                                          gnss_latency=args.gnss_latency / 1000.0,
                                          gnss_heading=math.radians(args.gnss_heading), mag_rate=args.mag_rate,
+                                         wheel_rate=_wheel_rate(args, scenario),
                                          mag=_sim_mag(MagConfig, run, args)),
                            progress=bar)
     except (ValueError, OSError) as exc:  # a piece that could not be made, or the link
@@ -147,6 +149,13 @@ def _cmd_sim(args: argparse.Namespace) -> int:
         return EXIT_USAGE
     print(f"mavins sim: streamed {stats.imu_messages} IMU messages to {args.stream}", file=sys.stderr)
     return 0
+
+
+def _wheel_rate(args: argparse.Namespace, scenario: object) -> float:
+    """--wheel-rate, by default 10 Hz for the car scenario and none for the others."""
+    if args.wheel_rate is not None:
+        return float(args.wheel_rate)
+    return 10.0 if getattr(scenario, "name", "") == "car" else 0.0
 
 
 def _sim_mag(mag_config: type, run: object, args: argparse.Namespace) -> object:

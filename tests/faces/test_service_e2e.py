@@ -809,3 +809,36 @@ def test_gnss_delay_gives_a_late_receiver_the_accuracy_of_true_stamps_live() -> 
     assert v_rms > 2.0, v_rms  # the flight moves: the test can tell late from true stamps
     assert rms(err_late) > v_rms * tau / 2.0, (rms(err_late), v_rms)
     assert rms(err_comp) <= rms(err_true) + a_max * tau ** 2 / 2.0, (rms(err_comp), rms(err_true), a_max)
+
+
+# -- wheel odometry over the live path ---------------------------------------------------------------------------
+def test_streamed_wheel_distance_is_fused_by_the_service() -> None:
+    """``mavins sim car --stream --wheel-rate 10`` (WHEEL_DISTANCE: one wheel's distance, 1 % long) into a
+    Service with ``--aiding gnss,wheel,nhc`` over UDP: every odometer speed after the alignment is accepted
+    (10 a second of navigation, less the first message and the ones that arrive before navigating), none is
+    rejected, no message is a gap, and the scale factor the filter learns is the simulator's 1 % within 3
+    sigma."""
+    from mavins.core import errmodel as em
+    from mavins.core import kalman
+    from mavins.live.engine import EngineConfig
+    from mavins.live.livefilter import FilterSettings
+    from mavins.link.ingest import IngestConfig
+    from mavins.service import Service, ServiceConfig
+
+    svc_port = free_udp_port()
+    client = Client()
+    tee = Tee(svc_port)
+    car = (48.137154, 11.576124, 520.0)  # sim/scenarios/car.toml [start]
+    svc = Service(EngineConfig(lat=car[0], lon=car[1], alt=car[2], heading=90.0, align=ALIGN_S,
+                               filter=FilterSettings(aiding=("gnss", "wheel", "nhc"))),
+                  IngestConfig(), ServiceConfig(master=f"udpin:127.0.0.1:{svc_port}",
+                                                outs=[f"udpout:127.0.0.1:{client.port}"]))
+    _serve_a_stream(svc, svc_port, client, tee,
+                    sim_command(tee.port, "--wheel-rate", "10", scenario="car", duration=120.0, speed=10))
+    c = svc.pipeline.engine.filter.counters
+    navigating = 120.0 - ALIGN_S
+    assert c["wheel_rejected"] == 0 and c["wheel_accepted"] >= 10 * navigating - 5, (dict(c), dict(svc.counters),
+                                                                                       dict(svc.pipeline.counters))
+    assert svc.pipeline.counters["wheel_gap"] == 0 and svc.pipeline.counters["wheel_invalid"] == 0
+    k, sig = svc.pipeline.engine.filter.bias[kalman.B_WS], math.sqrt(svc.pipeline.engine.filter.P[em.X_WS, em.X_WS])
+    assert abs(k - 0.01) < 3.0 * sig and sig < 0.002, (k, sig)
