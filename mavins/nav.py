@@ -336,9 +336,9 @@ def run_nav_aided(imu_path: Path, init_path: Path, out_path: Path, opts: NavOpti
         files.write_table(tmp, tuple(aided.ROW_COLUMNS[i] for i in keep), rows, keep)
     t_write = time.perf_counter() - t_start - t_read - t_compute
     if aiding.smooth:
-        print(f"mavins nav: smoothed over {stats['epochs']} epochs"
-              + (f"; at {stats['singular']} of them the prior could not be inverted and the forward solution "
-                 "was kept" if stats["singular"] else ""), file=sys.stderr)
+        from .core.smoother import described
+
+        print(f"mavins nav: {described(stats['epochs'], stats['singular'])}", file=sys.stderr)
     if opts.timing:
         t_sd = _strapdown_seconds(imu, init_keys, opts)
         print(f"timing: samples={imu.shape[0]} read_s={t_read:.3f} compute_s={t_compute:.3f} write_s={t_write:.3f} "

@@ -252,15 +252,20 @@ def wheel(run: "SimRun", config: WheelConfig = WheelConfig()) -> np.ndarray:
     t = _epochs(run, config.rate)
     _, vel, q, w = truth_at(run, t)
     rng = _rng(run, "wheel")
-    lever = np.asarray(config.lever_arm, dtype=np.float64)
     rows = np.empty((t.size, 3))
     rows[:, 0] = t
     rows[:, 2] = config.sigma
-    for k in range(t.size):
-        u = (quat_to_dcm(q[k]).T @ vel[k])[0] + np.cross(w[k], lever)[0]
-        rows[k, 1] = (1.0 + config.scale) * u
+    rows[:, 1] = (1.0 + config.scale) * forward_speed(q, vel, w, config.lever_arm)
     rows[:, 1] += config.sigma * rng.standard_normal(t.size)
     return rows
+
+
+def forward_speed(q: np.ndarray, vel: np.ndarray, w: np.ndarray, lever: Sequence[float]) -> np.ndarray:
+    """The true forward speed (m/s) at ``lever`` (m, body FRD) of rows of attitude ``q`` (C_b^n, scalar
+    first), NED velocity ``vel`` (m/s) and body rate ``w`` (rad/s): ``((C_b^n)^T v + w x l)_x``."""
+    lv = np.asarray(lever, dtype=np.float64)
+    return np.array([(quat_to_dcm(np.ascontiguousarray(q[k])).T @ vel[k])[0] + np.cross(w[k], lv)[0]
+                     for k in range(len(q))])
 
 
 def body_field(q: np.ndarray, config: MagConfig, noise: np.ndarray, t: float = math.nan) -> np.ndarray:

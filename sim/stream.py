@@ -36,7 +36,7 @@ from typing import Callable, Iterable, Iterator
 import numpy as np
 
 from . import errors
-from .aiding import MagConfig, WheelConfig, body_field
+from .aiding import MagConfig, WheelConfig, body_field, forward_speed
 from .generate import SimRun
 from .trajectory import instant_rates
 
@@ -146,11 +146,8 @@ def _piece_frames(run: SimRun, mav: mavlink.MAVLink, opts: StreamOptions, rng: n
     send_mag = every("mag", opts.mag_rate) if opts.mag_rate > 0 and opts.msg == "highres" else np.zeros(len(t), bool)
     send_wheel = every("wheel", opts.wheel_rate) if opts.wheel_rate > 0 else np.zeros(len(t), bool)
     if opts.wheel_rate > 0 and len(t):
-        # the forward speed at the IMU: body x in NED (C_b^n's first column from the scalar-first quaternion:
-        # 1 - 2(y^2 + z^2), 2(xy + wz), 2(xz - wy)) dotted with v, integrated over each sample interval
-        qw, qx, qy, qz = (truth[:, 10 + k] for k in range(4))
-        c0 = np.column_stack([1.0 - 2.0 * (qy * qy + qz * qz), 2.0 * (qx * qy + qw * qz), 2.0 * (qx * qz - qw * qy)])
-        u = np.einsum("ki,ki->k", c0, truth[:, 4:7])
+        # the forward speed at the IMU (wheel.csv's model, lever arm 0), integrated over each sample interval
+        u = forward_speed(truth[:, 10:14], truth[:, 4:7], w, (0.0, 0.0, 0.0))
         t0 = last.get("wheel_t")
         t_prev = np.concatenate(([t[0] if t0 is None else t0], t[:-1]))
         d0 = last.get("wheel_d")

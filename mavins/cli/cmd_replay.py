@@ -66,9 +66,9 @@ def _cmd_replay(args: argparse.Namespace) -> int:
           f"final state {eng.state.value}" + (f", heading from {eng.heading_used}" if eng.heading_used else ""),
           file=sys.stderr)
     if res.smoothed is not None:
-        print(f"mavins replay: smoothed over {res.smoothed[0]} epochs"
-              + (f"; at {res.smoothed[1]} of them the prior could not be inverted and the forward solution was "
-                 "kept" if res.smoothed[1] else ""), file=sys.stderr)
+        from ..core.smoother import described
+
+        print(f"mavins replay: {described(*res.smoothed)}", file=sys.stderr)
     if res.report is not None and res.report.damaged:
         print(f"mavins replay: warning: replayed what could be read: IMU samples from sensor time "
               f"{res.t_first:.3f} to {res.t_last:.3f} s", file=sys.stderr)

@@ -959,7 +959,13 @@ def scratch(shape: tuple[int, int]) -> np.ndarray:
     directory, TMPDIR): the operating system pages it, and frees it when the last view goes."""
     with tempfile.TemporaryFile(prefix="mavins-") as fh:
         fh.truncate(max(1, shape[0] * shape[1]) * 8)
-        return np.asarray(np.memmap(fh, dtype=np.float64, mode="r+", shape=shape))
+        return mapped(fh, shape)
+
+
+def mapped(fh: Any, shape: tuple[int, int]) -> np.ndarray:
+    """The float64 array of ``shape`` in the open file ``fh``, writable and mapped (not read into memory): the
+    kernels take it as a plain array."""
+    return np.asarray(np.memmap(fh, dtype=np.float64, mode="r+", shape=shape))
 
 
 def epoch_bound(t: np.ndarray, gnss: np.ndarray, baro: np.ndarray, mag: np.ndarray, static: np.ndarray,

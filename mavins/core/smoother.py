@@ -44,6 +44,13 @@ def store_width(na: int) -> int:
     return 2 + 2 * na + 3 * na * na
 
 
+def described(epochs: int, singular: int) -> str:
+    """What a smoothing did, for the command line: its epochs, and those whose prior could not be inverted."""
+    return f"smoothed over {epochs} epochs" + (
+        f"; at {singular} of them the prior could not be inverted and the forward solution was kept" if singular
+        else "")
+
+
 @kernel
 def store_slots(na: int) -> tuple[int, int, int, int, int]:
     """First columns of ``dx``, ``e``, ``P^-``, ``P^+`` (P^s after :func:`backward`) and ``Phi`` in a store row."""

@@ -26,6 +26,8 @@ from ..core.records import Uncertainty
 from .smoothing import EpochLog
 
 AIDING_KINDS = ("gnss", "baro", "mag", "zupt", "nhc", "wheel", "vision")
+# the --aiding kind a measurement comes with where its name differs (a dual-antenna heading with GNSS)
+AIDING_OF = {"gnss_yaw": "gnss", "vision_vel": "vision", "vision_body": "vision"}
 ABS_TIMEOUT_S = 5.0  # s of sensor time after the last accepted fix during which position counts as absolute
 GNSS_LOST_S = 3.0  # s without an accepted fix after which GNSS is reported lost
 JUMP_M = 1.0  # m: an accepted position correction above this is a discontinuity (reset_counter)
@@ -230,7 +232,7 @@ class LiveFilter:
         sigma), ``mag`` (m_b body), ``zupt`` (). A kind with a delay
         (``--gnss-delay`` ...) was measured that long before t_m and is fused at that time: taken back
         along the solution like any measurement older than the last attitude update (kalman.py)."""
-        aid = {"gnss_yaw": "gnss", "vision_vel": "vision", "vision_body": "vision"}.get(kind, kind)
+        aid = AIDING_OF.get(kind, kind)
         if aid not in self.settings.aiding:
             return
         t_m -= self.settings.delays.get(aid, 0.0)

@@ -43,7 +43,7 @@ class EpochLog:
         self._fh.flush()
         if self.count == 0:
             return np.zeros((0, self._row.shape[1]))
-        return np.asarray(np.memmap(self._fh, dtype=np.float64, mode="r+", shape=(self.count, self._row.shape[1])))
+        return aided.mapped(self._fh, (self.count, self._row.shape[1]))
 
 
 class KeptRows:
@@ -69,7 +69,7 @@ class KeptRows:
         self._fh.flush()
         if self.count == 0:
             return np.zeros((0, aided.ROW_SIZE)), 0
-        rows = np.asarray(np.memmap(self._fh, dtype=np.float64, mode="r+", shape=(self.count, aided.ROW_SIZE)))
+        rows = aided.mapped(self._fh, (self.count, aided.ROW_SIZE))
         if epochs is None or epochs.count < 2:
             return rows, 0
         store = epochs.store()
