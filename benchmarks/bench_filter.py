@@ -111,9 +111,10 @@ def taf() -> Any:
     """
     global _TAF
     if _TAF is None:
-        path = ROOT / "tests" / "test_aided_filter.py"
-        if str(path.parent) not in sys.path:
-            sys.path.append(str(path.parent))
+        path = ROOT / "tests" / "core" / "test_aided_filter.py"
+        for folder in (path.parent, ROOT / "tests"):
+            if str(folder) not in sys.path:
+                sys.path.append(str(folder))
         spec = importlib.util.spec_from_file_location("_bench_test_aided_filter", path)
         mod = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
         sys.modules[spec.name] = mod  # type: ignore[union-attr]

@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Sequence
 import numpy as np
 
 from mavins.core import earth
-from mavins.core.rotation import quat_to_dcm
+from mavins.core.rotation import dcm_to_quat, quat_to_dcm, rotvec_to_dcm
 
 if TYPE_CHECKING:
     from .generate import SimRun
@@ -40,7 +40,7 @@ BARO_COLUMNS = ("t", "h", "sigma")
 MAG_COLUMNS = ("t", "mx", "my", "mz", "sigma")
 WHEEL_COLUMNS = ("t", "speed", "sigma")
 
-_STREAMS = {"gnss": 0x6E1, "baro": 0x6E2, "mag": 0x6E3, "wheel": 0x6E4}
+_STREAMS = {"gnss": 0x6E1, "baro": 0x6E2, "mag": 0x6E3, "wheel": 0x6E4, "vision": 0x6E5}
 
 
 @dataclass(frozen=True)
@@ -112,6 +112,54 @@ class MagConfig:
         """The Earth field in NED (uT)."""
         d, i = math.radians(self.declination), math.radians(self.inclination)
         return self.strength * np.array([math.cos(i) * math.cos(d), math.cos(i) * math.sin(d), math.sin(i)])
+
+
+@dataclass(frozen=True)
+class VisionConfig:
+    """A camera's pose and velocity (a visual-inertial odometer, motion capture) in its own local frame: z down,
+    its x axis ``yaw`` (rad) east of north, its origin ``origin`` (m, NED from the run's first position); white
+    noise ``sigma_pos`` (m per axis of the frame), ``sigma_att`` (rad about each body axis), ``sigma_vel`` (m/s
+    per body axis); ``rate`` poses a second."""
+
+    rate: float = 30.0
+    sigma_pos: float = 0.05
+    sigma_att: float = math.radians(1.0)
+    sigma_vel: float = 0.05
+    yaw: float = math.radians(30.0)
+    origin: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+def camera_pose(llh: np.ndarray, q: np.ndarray, vel: np.ndarray, start: Sequence[float], config: VisionConfig,
+                rng: np.random.Generator) -> np.ndarray:
+    """Rows ``x y z`` (m, in the camera's frame), ``qw qx qy qz`` (body FRD to that frame), ``vx vy vz`` (m/s,
+    body FRD) of the truth rows ``llh`` (lat, lon rad, h m), ``q`` (C_b^n, scalar first) and ``vel`` (NED m/s),
+    seen from the frame of ``config`` whose origin is counted from ``start`` (lat, lon rad, h m): the NED
+    metres from the start (radii at the start: below 2 cm per km of the filter's, kalman.vision_relative)
+    less the origin, turned by ``Rz(yaw)^T``; the attitude ``Rz(yaw)^T C exp([n x])`` with n the body-axis
+    noise; the velocity ``C^T v`` plus noise."""
+    lat0, lon0, h0 = (float(v) for v in start)
+    r_n, r_e = earth.radii(lat0)
+    c, s = math.cos(config.yaw), math.sin(config.yaw)
+    rt = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])  # Rz(yaw)^T: NED to the camera's frame
+    ned = np.column_stack([(llh[:, 0] - lat0) * (r_n + h0), (llh[:, 1] - lon0) * (r_e + h0) * math.cos(lat0),
+                           h0 - llh[:, 2]]) - np.asarray(config.origin, dtype=np.float64)
+    out = np.empty((len(llh), 10))
+    out[:, 0:3] = ned @ rt.T + config.sigma_pos * rng.standard_normal((len(llh), 3))
+    for k in range(len(llh)):
+        cbn = quat_to_dcm(np.ascontiguousarray(q[k]))
+        out[k, 3:7] = dcm_to_quat(rt @ cbn @ rotvec_to_dcm(config.sigma_att * rng.standard_normal(3)))
+        out[k, 7:10] = cbn.T @ vel[k] + config.sigma_vel * rng.standard_normal(3)
+    return out
+
+
+def vision(run: "SimRun", config: VisionConfig = VisionConfig()) -> np.ndarray:
+    """Camera rows ``t`` and :func:`camera_pose`'s columns at ``config.rate`` over the run, the frame's origin
+    counted from the run's first position."""
+    t = _epochs(run, config.rate)
+    llh, vel, q, _ = truth_at(run, t)
+    tr = run.exact.truth[0]
+    start = (math.radians(tr[1]), math.radians(tr[2]), tr[3])
+    return np.column_stack([t, camera_pose(llh, q, vel, start, config, _rng(run, "vision"))])
 
 
 @dataclass(frozen=True)

@@ -14,7 +14,12 @@ time (``time_usec``/``time_boot_ms``):
   message before it);
 * ATTITUDE (10 Hz): the simulated autopilot's own attitude estimate, taken as
   the vehicle's true attitude;
-* GPS_RAW_INT (5 Hz) and SCALED_PRESSURE (10 Hz) from the truth with noise;
+* GPS_RAW_INT (5 Hz; ``gps_rate`` 0: none) and SCALED_PRESSURE (10 Hz) from the truth with noise;
+* with ``vision_rate`` > 0, ODOMETRY from a camera (component 197, MAV_COMP_ID_VISUAL_INERTIAL_ODOMETRY):
+  frame LOCAL_FRD, child BODY_FRD, the pose and body velocity of sim.aiding.camera_pose (the frame of
+  ``vision``, its origin counted from the first sample's position) with their covariances, and
+  GPS_GLOBAL_ORIGIN (the first sample's position) with each HEARTBEAT, as an autopilot that navigates
+  without GNSS sends its origin;
 * with ``mag_rate`` > 0, the magnetometer in the first HIGHRES_IMU of each
   1/mag_rate (gauss, ``fields_updated`` bits 6-8 set, as PX4 marks a new
   magnetometer sample): the Earth field of sim.aiding.MagConfig seen by the
@@ -36,11 +41,12 @@ from typing import Callable, Iterable, Iterator
 import numpy as np
 
 from . import errors
-from .aiding import MagConfig, WheelConfig, body_field, forward_speed
+from .aiding import MagConfig, VisionConfig, WheelConfig, body_field, camera_pose, forward_speed
 from .generate import SimRun
 from .trajectory import instant_rates
 
 from mavins.link.mavlink import mavlink, mavutil
+from mavins.link.publish import COV_DIAG
 from mavins.common.progress import Progress
 
 G0 = 9.80665  # ArduPilot's mG scale (m/s^2 per 1000 mG)
@@ -48,6 +54,7 @@ HIGHRES_ACC_GYRO = 0b111111  # fields_updated: x/y/z acc and gyro
 HIGHRES_MAG = 0b111000000  # fields_updated: x/y/z magnetometer
 GAUSS_PER_UT = 0.01
 WHEEL_SCALE = WheelConfig().scale  # the streamed odometer's scale-factor error, as wheel.csv's
+CAMERA_COMPONENT = mavlink.MAV_COMP_ID_VISUAL_INERTIAL_ODOMETRY  # 197: the camera's ODOMETRY comes from it
 
 
 @dataclass(frozen=True)
@@ -73,6 +80,8 @@ class StreamOptions:
     mag_rate: float = 0.0  # Hz of magnetometer samples in HIGHRES_IMU id 0 (0 = none)
     mag: MagConfig = MagConfig()  # the field and the sensor's noise
     wheel_rate: float = 0.0  # Hz of WHEEL_DISTANCE (one wheel at the IMU: the forward distance, 1 % long; 0 = none)
+    vision_rate: float = 0.0  # Hz of ODOMETRY from a camera (pose and body velocity in its frame; 0 = none)
+    vision: VisionConfig = VisionConfig()  # the camera's frame and noise
 
 
 @dataclass
@@ -101,17 +110,19 @@ def frames(run: SimRun | Iterable[SimRun], mav: mavlink.MAVLink, opts: StreamOpt
     rng = np.random.default_rng(opts.seed + 1)
     mag_rng = np.random.default_rng([opts.seed, 0x6E3])  # apart from the GPS/baro noise
     heading_rng = np.random.default_rng([opts.seed, 0x4EAD])  # the dual-antenna heading's, likewise
+    vision_rng = np.random.default_rng([opts.seed, 0x7150])  # the camera's, likewise
     last: dict[str, float | None] = {}
     pending: list[tuple[float, tuple]] = []  # GNSS fixes measured, not yet sent (gnss_latency), across pieces
     whole = isinstance(run, SimRun)
     for piece in ([run] if whole else run):
         if not whole and len(piece.extra) < opts.imus - 1:
             raise ValueError(f"streaming {opts.imus} IMUs from pieces: make them with generate_chunks(imus={opts.imus})")
-        yield from _piece_frames(piece, mav, opts, rng, mag_rng, heading_rng, last, pending)
+        yield from _piece_frames(piece, mav, opts, rng, mag_rng, heading_rng, vision_rng, last, pending)
 
 
 def _piece_frames(run: SimRun, mav: mavlink.MAVLink, opts: StreamOptions, rng: np.random.Generator,
-                  mag_rng: np.random.Generator, heading_rng: np.random.Generator, last: dict[str, float | None],
+                  mag_rng: np.random.Generator, heading_rng: np.random.Generator, vision_rng: np.random.Generator,
+                  last: dict[str, float | None],
                   pending: list[tuple[float, tuple]]
                   ) -> Iterator[tuple[float, list[mavlink.MAVLink_message]]]:
     """frames() of one run or piece; ``last`` carries the periods of the message rates between pieces,
@@ -139,7 +150,7 @@ def _piece_frames(run: SimRun, mav: mavlink.MAVLink, opts: StreamOptions, rng: n
         return mask
 
     send_truth = every("truth", opts.truth_rate)
-    send_gps = every("gps", opts.gps_rate)
+    send_gps = every("gps", opts.gps_rate) if opts.gps_rate > 0 else np.zeros(len(t), bool)
     send_baro = every("baro", opts.baro_rate)
     send_att = every("attitude", opts.attitude_rate)
     send_hb = every("heartbeat", 1.0)
@@ -153,12 +164,26 @@ def _piece_frames(run: SimRun, mav: mavlink.MAVLink, opts: StreamOptions, rng: n
         d0 = last.get("wheel_d")
         d = (0.0 if d0 is None else d0) + np.cumsum(u * (t - t_prev)) * (1.0 + WHEEL_SCALE)
         last["wheel_t"], last["wheel_d"] = float(t[-1]), float(d[-1])
+    camera: dict[int, np.ndarray] = {}
+    if opts.vision_rate > 0 and len(t):
+        if last.get("vision_lat") is None:  # the camera frame's origin is counted from the first sample's position
+            last["vision_lat"], last["vision_lon"], last["vision_h"] = (
+                math.radians(truth[0, 1]), math.radians(truth[0, 2]), float(truth[0, 3]))
+        start = (last["vision_lat"], last["vision_lon"], last["vision_h"])
+        idx = np.flatnonzero(every("vision", opts.vision_rate))
+        llh = np.column_stack([np.radians(truth[idx, 1]), np.radians(truth[idx, 2]), truth[idx, 3]])
+        camera = dict(zip(idx.tolist(), camera_pose(llh, truth[idx, 10:14], truth[idx, 4:7], start, opts.vision,
+                                                    vision_rng)))
     for i in range(len(t)):
         usec = int(round(t[i] * 1e6))
         out: list[mavlink.MAVLink_message] = []
         if send_hb[i]:
             out.append(mav.heartbeat_encode(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_GENERIC,
                                             mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 0, mavlink.MAV_STATE_ACTIVE))
+            if camera or (opts.vision_rate > 0 and last.get("vision_lat") is not None):
+                out.append(mav.gps_global_origin_encode(int(round(math.degrees(last["vision_lat"]) * 1e7)),  # type: ignore[arg-type]
+                                                        int(round(math.degrees(last["vision_lon"]) * 1e7)),  # type: ignore[arg-type]
+                                                        int(round(last["vision_h"] * 1000)), usec))  # type: ignore[operator]
         if opts.msg == "raw":
             acc = np.clip(np.round(f[i] / opts.raw_acc_scale), -32768, 32767).astype(int)
             gyr = np.clip(np.round(w[i] / opts.raw_gyro_scale), -32768, 32767).astype(int)
@@ -214,10 +239,27 @@ def _piece_frames(run: SimRun, mav: mavlink.MAVLink, opts: StreamOptions, rng: n
             out.append(mav.gps_raw_int_encode(usec, *pending.pop(0)[1]))
         if send_wheel[i]:
             out.append(mav.wheel_distance_encode(usec, 1, [float(d[i])] + [0.0] * 15))
+        if i in camera:
+            out.append(_camera_odometry(camera[i], usec, opts.vision, mav))
         if send_baro[i]:
             press = 1013.25 * (1 - 2.25577e-5 * row[3]) ** 5.25588 + rng.normal(0.0, 0.012)
             out.append(mav.scaled_pressure_encode(usec // 1000 % (2**32), press, 0.0, 2000, 0))
         yield float(t[i]), out
+
+
+def _camera_odometry(row: np.ndarray, usec: int, cfg: VisionConfig, mav: mavlink.MAVLink) -> mavlink.MAVLink_message:
+    """A camera's ODOMETRY (sim.aiding.camera_pose's row), its covariances' diagonals (upper triangles of 6 x 6,
+    COV_DIAG) the configured variances, the body rates unknown (NaN); sent from the camera's component
+    (``sim_component``: :func:`stream` sends it as that component, not the autopilot's)."""
+    pose, vel = [0.0] * 21, [0.0] * 21
+    for k, i in enumerate(COV_DIAG):
+        pose[i] = cfg.sigma_pos ** 2 if k < 3 else cfg.sigma_att ** 2
+        vel[i] = cfg.sigma_vel ** 2 if k < 3 else math.nan
+    msg = mav.odometry_encode(usec, mavlink.MAV_FRAME_LOCAL_FRD, mavlink.MAV_FRAME_BODY_FRD, *map(float, row[0:3]),
+                              [float(v) for v in row[3:7]], *map(float, row[7:10]), math.nan, math.nan, math.nan,
+                              pose, vel, 0, mavlink.MAV_ESTIMATOR_TYPE_VIO, 100)
+    msg.sim_component = CAMERA_COMPONENT
+    return msg
 
 
 def _extra_imus(run: SimRun, opts: StreamOptions) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -313,6 +355,8 @@ def stream(run: SimRun | Iterable[SimRun], url: str, opts: StreamOptions, stop: 
                 if delay > 0:
                     time.sleep(delay)
             for m in msgs:
+                comp = getattr(m, "sim_component", None)  # another component of the vehicle (the camera's)
+                conn.mav.srcComponent = opts.compid if comp is None else comp
                 conn.mav.send(m)
                 stats.messages += 1
             stats.imu_messages += 1

@@ -445,3 +445,30 @@ def feed_engine(engine, run, gnss: np.ndarray, each_fix=None, row=None, wheel=No
         if sol is not None:
             out.append(sol.row if row is None else row(sol))
     return out
+
+
+# -- Monte Carlo consistency --------------------------------------------------------------------------------------
+Z975 = 1.959963984540054  # the standard normal's 97.5 % quantile
+Z995 = 2.5758293035489004  # and its 99.5 %
+
+
+def chi2_quantile(z: float, k: float) -> float:
+    """Wilson-Hilferty: the chi-square(k) quantile at the standard normal quantile z."""
+    c = 2.0 / (9.0 * k)
+    return k * (1.0 - c + z * math.sqrt(c)) ** 3
+
+
+def consumer_stochastic(grade: str = "consumer"):  # type: ignore[no-untyped-def]
+    """The simulator's error model of a grade (consumer by default) without the errors outside the filter's model
+    (scale factors, misalignments, g-sensitivity, dropped samples): what a consistency test simulates."""
+    import dataclasses
+
+    from sim import errors
+
+    m = errors.grade(grade)
+    zero33 = ((0.0, 0.0, 0.0),) * 3
+
+    def strip(s: errors.SensorErrorModel) -> errors.SensorErrorModel:
+        return dataclasses.replace(s, scale_factor_ppm=(0.0, 0.0, 0.0), misalignment=zero33)
+
+    return dataclasses.replace(m, gyro=strip(m.gyro), accel=strip(m.accel), g_sensitivity=zero33, drop_probability=0.0)

@@ -49,8 +49,9 @@ def _add_sim(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--speed", type=_Speed(), default="1", metavar="X|max",
                    help="streaming pace: 1 = real time, 10 = ten times, max = as fast as possible")
     p.add_argument("--sysid", type=_positive_int(*SYSID), default=1, metavar="ID", help="system id of the simulated autopilot")
-    p.add_argument("--gnss-rate", type=_real(0.0, 100.0), default=1.0, metavar="HZ",
-                   help="GNSS fixes per second written to gnss.csv (with baro.csv; 0 = none; docs/simulator.md)")
+    p.add_argument("--gnss-rate", type=_real(0.0, 100.0), default=None, metavar="HZ",
+                   help="GNSS fixes per second written to gnss.csv (with baro.csv; default 1) or streamed as "
+                        "GPS_RAW_INT (default 5); 0 = none (docs/simulator.md)")
     p.add_argument("--gnss-outage", type=_Outage(), metavar="START,END",
                    help="no GNSS fix between these sensor times (s), in files and when streaming")
     p.add_argument("--gnss-latency", type=_real(0.0, 1000.0), default=0.0, metavar="MS",
@@ -66,6 +67,10 @@ def _add_sim(sub: argparse._SubParsersAction) -> None:
                    help="wheel odometer speeds per second written to wheel.csv (t,speed,sigma: the forward speed with a "
                         "1 %% scale-factor error and 0.05 m/s noise), or with --stream WHEEL_DISTANCE messages (one "
                         "wheel: the distance travelled, 1 %% long); 0 = none; default 10 for the car scenario, else 0")
+    p.add_argument("--vision-rate", type=_real(0.0, 200.0), default=0.0, metavar="HZ",
+                   help="with --stream: a camera's ODOMETRY per second (pose and body velocity in its own frame, "
+                        "heading 30 deg, origin at the start; 5 cm, 1 deg, 5 cm/s noise) and GPS_GLOBAL_ORIGIN with "
+                        "each HEARTBEAT (0 = none; docs/simulator.md)")
     p.add_argument("--date", type=_Date(), default=None, metavar="YYYY-MM-DD",
                    help="the date of the simulated magnetic field (or a decimal year); default: today's")
     p.add_argument("--mag-hard-iron", type=_Vec3(), default="0,0,0", metavar="X,Y,Z",
@@ -109,9 +114,10 @@ def _cmd_sim(args: argparse.Namespace) -> int:
             from sim.aiding import BaroConfig, GnssConfig, MagConfig, WheelConfig, simulate_aiding
 
             outages = (tuple(args.gnss_outage),) if args.gnss_outage else ()
-            gnss_on = args.gnss_rate > 0
+            gnss_rate = 1.0 if args.gnss_rate is None else args.gnss_rate
+            gnss_on = gnss_rate > 0
             wheel_rate = _wheel_rate(args, scenario)
-            aiding = simulate_aiding(run, GnssConfig(rate=args.gnss_rate, outages=outages) if gnss_on else None,
+            aiding = simulate_aiding(run, GnssConfig(rate=gnss_rate, outages=outages) if gnss_on else None,
                                      BaroConfig() if gnss_on else None,
                                      _sim_mag(MagConfig, run, args) if args.mag_rate > 0 else None,
                                      WheelConfig(rate=wheel_rate) if wheel_rate > 0 else None) \
@@ -141,7 +147,8 @@ def _cmd_sim(args: argparse.Namespace) -> int:
                                          imus=args.imus, seed=args.seed, gnss_outages=outages,
                                          gnss_latency=args.gnss_latency / 1000.0,
                                          gnss_heading=math.radians(args.gnss_heading), mag_rate=args.mag_rate,
-                                         wheel_rate=_wheel_rate(args, scenario),
+                                         wheel_rate=_wheel_rate(args, scenario), vision_rate=args.vision_rate,
+                                         **({} if args.gnss_rate is None else {"gps_rate": args.gnss_rate}),
                                          mag=_sim_mag(MagConfig, run, args)),
                            progress=bar)
     except (ValueError, OSError) as exc:  # a piece that could not be made, or the link

@@ -65,7 +65,7 @@ POSITIVE = dict(lo=0.0, above=True)  # ranges used by several options
 SYSID = (1, 255)
 
 
-HEADING_WORDS = ("auto", "gyrocompass", "mag", "vehicle")  # engine.HEADING_WORDS (not imported: --help stays light)
+HEADING_WORDS = ("auto", "gyrocompass", "mag", "vehicle", "vision")  # engine.HEADING_WORDS (not imported: --help stays light)
 
 
 AIDING_WORDS = ("gnss", "baro", "mag", "zupt", "nhc", "wheel", "vision")  # aiding.AIDING_KINDS, likewise
@@ -178,7 +178,7 @@ def _filter_options(g: argparse._ArgumentGroup, with_aiding: bool = True) -> Non
     """The error-state filter's options (docs/conventions.md "Aided navigation")."""
     if with_aiding:
         g.add_argument("--aiding", type=_Aiding(), default="gnss,baro,mag", metavar="KINDS",
-                       help="comma list of gnss,baro,mag,zupt,nhc,wheel,vision to use from the stream (nhc: the non-holonomic constraint of a wheeled vehicle; wheel: WHEEL_DISTANCE odometry; vision: the velocity of VISION_SPEED_ESTIMATE and ODOMETRY from a camera or motion capture), or none (free inertial)")
+                       help="comma list of gnss,baro,mag,zupt,nhc,wheel,vision to use from the stream (nhc: the non-holonomic constraint of a wheeled vehicle; wheel: WHEEL_DISTANCE odometry; vision: the pose of ODOMETRY and VISION_POSITION_ESTIMATE and the velocity of ODOMETRY and VISION_SPEED_ESTIMATE from a camera or motion capture, its frame's origin and heading estimated), or none (free inertial)")
     g.add_argument("--grade", choices=GRADES, default="consumer",
                    help="the filter's IMU error model: the simulator's grade figures")
     g.add_argument("--imu-spec", type=Path, metavar="SPEC.toml",
@@ -206,6 +206,12 @@ def _filter_options(g: argparse._ArgumentGroup, with_aiding: bool = True) -> Non
     g.add_argument("--wheel-sigma", type=_real(0.0, 100.0, above=True), metavar="M/S",
                    help="1-sigma of one odometer speed (m/s) (default: the filter's, docs/filter.md; nav: for rows "
                         "without a sigma)")
+    if with_aiding:
+        g.add_argument("--vision-drift", type=_real(0.0, 100.0), default=None, metavar="M/RTS",
+                       help="random walk of the camera frame's origin, m/sqrt(s): how fast a VIO's position drifts "
+                            "(0 for motion capture; default: the filter's, docs/filter.md)")
+        g.add_argument("--vision-yaw-drift", type=_real(0.0, 3600.0), default=None, metavar="DEG/RTH",
+                       help="random walk of the camera frame's heading, deg/sqrt(h) (default: the filter's)")
     for kind, what in DELAYED:
         g.add_argument(f"--{kind}-delay", type=_real(0.0, 1000.0), default=0.0, metavar="MS",
                        help=f"the {what} stamped t was measured MS ms earlier, at t - MS/1000, and is fused at that "
@@ -394,8 +400,10 @@ def _nav_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--alt", type=_real(-1e4, 1e6), metavar="M", help="initial ellipsoidal height")
     g.add_argument("--heading", type=_Heading(), default="auto", metavar="DEG|SOURCE",
                    help="initial yaw in degrees, or a source: vehicle (its ATTITUDE), mag (magnetometer), "
-                        "gyrocompass (navigation-grade gyros), auto (vehicle, else a dual-antenna GNSS yaw, else "
-                        "mag, else gyrocompass, or with coarse gyros the heading from GNSS velocity once moving)")
+                        "gyrocompass (navigation-grade gyros), vision (a camera's attitude: its frame's x axis as "
+                        "north), auto (vehicle, else a dual-antenna GNSS yaw, else mag, else vision when it is the "
+                        "only position aiding, else gyrocompass, or with coarse gyros the heading from GNSS "
+                        "velocity once moving)")
     g.add_argument("--gnss-yaw-offset", type=_real(-180.0, 180.0), default=0.0, metavar="DEG",
                    help="azimuth of the dual-antenna GNSS baseline in the body (FRD, 0 = along x, 90 = to the right): "
                         "the vehicle's heading is the receiver's yaw (GPS_RAW_INT yaw) minus this")
@@ -511,7 +519,10 @@ def _engine_config(args: argparse.Namespace):  # type: ignore[no-untyped-def]
                          misalignment=args.misalignment, smooth=getattr(args, "smooth", False),
                          wheel_lever_arm=tuple(args.wheel_lever_arm),
                          **({} if args.wheel_scale is None else {"wheel_scale": args.wheel_scale / 100.0}),
-                         **({} if args.wheel_sigma is None else {"sigma_wheel": args.wheel_sigma}))
+                         **({} if args.wheel_sigma is None else {"sigma_wheel": args.wheel_sigma}),
+                         **({} if getattr(args, "vision_drift", None) is None else {"vision_drift": args.vision_drift}),
+                         **({} if getattr(args, "vision_yaw_drift", None) is None
+                            else {"vision_yaw_drift": args.vision_yaw_drift}))
     from ..core.settings import strapdown_from_options
 
     strapdown = strapdown_from_options(args)

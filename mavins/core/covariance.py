@@ -13,14 +13,14 @@ over steps of T seconds as
 zero navigation error (every run starts from the true initial state) and the
 sensors' random constants at their 1-sigma.
 
-The analysis augments the filter's NX = 44 states (errmodel.py) with the
+The analysis augments the filter's NX = 48 states (errmodel.py) with the
 scale factor and misalignment of each triad as random constants (18 states,
 for the analysis only: it takes the mean of ``C[r, i] u_j`` over each step,
 where the filter's own scale-factor and misalignment states, which stay at
 zero here, take the mean C times the mean u):
 
-    x[44:53]  K_g  gyro error matrix, row-major: K[i, j] at 44 + 3 i + j
-    x[53:62]  K_a  accelerometer error matrix, likewise
+    x[48:57]  K_g  gyro error matrix, row-major: K[i, j] at 48 + 3 i + j
+    x[57:66]  K_a  accelerometer error matrix, likewise
 
 ``measured = (I + K) true + bias``: the diagonal of K is the scale-factor
 error, the off-diagonal terms the misalignment / non-orthogonality (sim/errors.py

@@ -18,6 +18,9 @@ bias vector's layout derive from it)::
     x[28:34] mg    gyro misalignment, the off-diagonal m_xy m_xz m_yx m_yz m_zx m_zy (rad)
     x[34:40] ma    accelerometer misalignment, likewise (rad)
     x[40:43] mb    magnetometer hard-iron bias (body FRD, the magnetometer's unit)
+    x[43]    ws    wheel odometer scale-factor error (dimensionless)
+    x[44:47] vp    external vision frame's origin (m, NED from the vision reference point)
+    x[47]    vy    external vision frame's heading (rad): the angle about down from north to its x axis
 
 The first 15 are the contract's. A sensor bias (``measured = true + b``) is
 ``b = b_const + b_gm``: a turn-on constant, slowly walking (rate random walk),
@@ -41,7 +44,8 @@ i.e. ``dpsi = phi``, and errors are estimate minus truth), the blocks are::
     dbg/dt  = n_rrw,g                 dba/dt = n_rrw,a
     dgg/dt  = -gg / tau_g + n_gm,g    dga/dt = -ga / tau_a + n_gm,a
     dob/dt  = n_baro
-    dsg/dt  = dsa/dt = dmg/dt = dma/dt = dmb/dt = 0     (random constants)
+    dsg/dt  = dsa/dt = dmg/dt = dma/dt = dmb/dt = dws/dt = 0     (random constants)
+    dvp/dt  = n_vision                dvy/dt = n_vision,yaw      (the camera's drift, random walks)
 
 Scale factor (Titterton & Weston, Strapdown Inertial Navigation Technology,
 2nd ed., 2004, ch. 12, sensor error model ``dw = B + S w``; KF-GINS's state):
@@ -155,6 +159,9 @@ STATE = (
     Block("MA", 6, "rad", "accelerometer misalignment (off-diagonal, row-major)", sensor=True),
     Block("MB", 3, "mag", "magnetometer hard-iron bias, body FRD (the magnetometer's unit)", sensor=True),
     Block("WS", 1, "1", "wheel odometer scale-factor error: measured speed = (1 + k) true speed", sensor=True),
+    # external vision (a VIO camera, motion capture): where its local frame sits (kalman.vision_position)
+    Block("VP", 3, "m", "vision frame's origin, NED metres from the vision reference point", sensor=True),
+    Block("VY", 1, "rad", "vision frame's heading: rotation about down from north to its x axis", sensor=True),
 )
 OFFSET = {b.name: sum(a.size for a in STATE[:i]) for i, b in enumerate(STATE)}  # block -> first index
 NX = sum(b.size for b in STATE)
@@ -162,7 +169,7 @@ NX = sum(b.size for b in STATE)
 X_PHI, X_DV, X_DP = OFFSET["PHI"], OFFSET["DV"], OFFSET["DP"]
 X_BG, X_BA, X_GG, X_GA, X_BARO = OFFSET["BG"], OFFSET["BA"], OFFSET["GG"], OFFSET["GA"], OFFSET["BARO"]
 X_SG, X_SA, X_MG, X_MA, X_MB = OFFSET["SG"], OFFSET["SA"], OFFSET["MG"], OFFSET["MA"], OFFSET["MB"]
-X_WS = OFFSET["WS"]
+X_WS, X_VP, X_VY = OFFSET["WS"], OFFSET["VP"], OFFSET["VY"]
 N_CONTRACT = OFFSET["GG"]  # the contract's states (attitude ... accelerometer bias); the rest follow them
 X_SENSORS = min(OFFSET[b.name] for b in STATE if b.sensor)  # the sensor errors run from here to the end
 
@@ -183,7 +190,9 @@ SP_ACC_SCALE = 12  # likewise of the accelerometer's
 SP_GYRO_MIS = 13  # initial 1-sigma of each gyro misalignment element (rad; 0: not estimated)
 SP_ACC_MIS = 14  # likewise of the accelerometer's
 SP_WHEEL_SCALE = 15  # initial 1-sigma of the wheel odometer's scale-factor error (dimensionless; 0: not estimated)
-SP_SIZE = 16
+SP_VISION_DRIFT = 16  # random walk of the vision frame's origin (m/sqrt(s)): a camera's position drift
+SP_VISION_YAW_DRIFT = 17  # random walk of its heading (rad/sqrt(s))
+SP_SIZE = 18
 
 _DEG = math.pi / 180.0
 _DEG_PER_H = _DEG / 3600.0
@@ -376,13 +385,19 @@ def spec_of(spec: str | ImuSpec | Mapping[str, float], scale_factors: bool = Fal
 
 
 def make_spec(spec: str | ImuSpec | Mapping[str, float], baro_drift: float = 0.0,
-              scale_factors: bool = False, misalignment: bool = False, wheel_scale: float = 0.0) -> np.ndarray:
+              scale_factors: bool = False, misalignment: bool = False, wheel_scale: float = 0.0,
+              vision_drift: float = 0.0, vision_yaw_drift: float = 0.0) -> np.ndarray:
     """Process-model vector from a grade name, an ImuSpec or the contract's spec keys (:func:`spec_of`);
-    ``wheel_scale``: the wheel odometer's initial scale-factor 1-sigma (dimensionless; 0: no odometer)."""
-    if not (math.isfinite(wheel_scale) and wheel_scale >= 0.0):
-        raise ValueError(f"wheel_scale must be finite and >= 0, got {wheel_scale!r}")
+    ``wheel_scale``: the wheel odometer's initial scale-factor 1-sigma (dimensionless; 0: no odometer);
+    ``vision_drift`` (m/sqrt(s)), ``vision_yaw_drift`` (rad/sqrt(s)): random walks of a camera's frame."""
+    for name, v in (("wheel_scale", wheel_scale), ("vision_drift", vision_drift),
+                    ("vision_yaw_drift", vision_yaw_drift)):
+        if not (math.isfinite(v) and v >= 0.0):
+            raise ValueError(f"{name} must be finite and >= 0, got {v!r}")
     sp = spec_of(spec, scale_factors, misalignment).as_array(baro_drift)
     sp[SP_WHEEL_SCALE] = wheel_scale
+    sp[SP_VISION_DRIFT] = vision_drift
+    sp[SP_VISION_YAW_DRIFT] = vision_yaw_drift
     return sp
 
 
@@ -572,6 +587,9 @@ def noise_density(spec: np.ndarray) -> np.ndarray:
         if spec[SP_ACC_GM] > 0.0:
             q[X_GA + i] = 2.0 * spec[SP_ACC_GM] ** 2 / spec[SP_ACC_TAU]
     q[X_BARO] = spec[SP_BARO_DRIFT] ** 2
+    for i in range(3):
+        q[X_VP + i] = spec[SP_VISION_DRIFT] ** 2
+    q[X_VY] = spec[SP_VISION_YAW_DRIFT] ** 2
     return q
 
 

@@ -11,7 +11,8 @@ refuse aiding in the other frames.
 Bias vector ``bias`` (``B_*``, the filter's nominal sensor-error estimates):
 ``[bg_const(3) rad/s, ba_const(3) m/s^2, bg_gm(3), ba_gm(3), baro_offset m,
 sg(3), sa(3) scale factors, mg(6), ma(6) misalignments, mb(3) magnetometer
-hard iron]``; ``bias[i]`` corrects ``x[X_SENSORS + i]``. The bias the sensor
+hard iron, ws wheel scale factor, vp(3) m and vy rad: where an external vision
+frame sits]``; ``bias[i]`` corrects ``x[X_SENSORS + i]``. The bias the sensor
 carries is ``const + gm`` per axis; the IMU data are corrected as ``u - M u``
 with ``u = (measured - bias) / (1 + scale)`` (:func:`correct_gyro3`,
 :func:`correct_accel3`; errmodel.py's sensor model).
@@ -68,13 +69,15 @@ from .errmodel import (
     X_SA,
     X_SENSORS,
     X_SG,
+    X_VP,
+    X_VY,
     X_WS,
     _set_skew,
     matmul,
     matmul_bt,
 )
 from .jit import kernel
-from .rotation import mat3_mul_s, mat_vec, quat_mul_s, quat_to_dcm_s, rotvec_to_dcm_s, rotvec_to_quat_s, skew, wrap_pi
+from .rotation import dcm_to_rotvec, mat3_mul_s, mat_vec, quat_mul_s, quat_to_dcm_s, rotvec_to_dcm_s, rotvec_to_quat_s, skew, wrap_pi
 
 ALL = np.ones(NX)  # update(): every state may be corrected
 ALL_BUT_HEADING = ALL.copy()  # update(): the heading is a consider state (unknown, not learnt: engine.GNSS_YAW_PENDING)
@@ -85,7 +88,7 @@ B_BG, B_BA, B_GG, B_GA, B_BARO = (X_BG - X_SENSORS, X_BA - X_SENSORS, X_GG - X_S
                                   X_BARO - X_SENSORS)
 B_SG, B_SA, B_MB = X_SG - X_SENSORS, X_SA - X_SENSORS, X_MB - X_SENSORS
 B_MG, B_MA = X_MG - X_SENSORS, X_MA - X_SENSORS
-B_WS = X_WS - X_SENSORS
+B_WS, B_VP, B_VY = X_WS - X_SENSORS, X_VP - X_SENSORS, X_VY - X_SENSORS
 B_SIZE = NX - X_SENSORS
 
 
@@ -717,6 +720,148 @@ def wheel_speed(s: np.ndarray, bias: np.ndarray, speed: float, w_ib: np.ndarray,
     H[0, X_WS] = u
     R[0, 0] = sigma * sigma
     return nu, H, R
+
+
+# --- external vision: a camera's pose in its own local frame ----------------------------------------
+# The frame V (a VIO camera's or a motion-capture system's: z down, origin and heading arbitrary) is placed by
+# two states: its origin o (X_VP, NED metres from the reference point ``ref`` = lat, lon rad, h m, which
+# LiveFilter fixes at the first pose) and its heading psi (X_VY: about down from north to V's x axis), so
+# that a NED vector is ``Rz(psi)`` times the same vector in V. Rotating about one axis, Rz(psi + e) = Rz(psi)
+# (I + e [z x]) with [z x] commuting with Rz (Groves 2nd ed., section 2.2, rotations about one axis).
+
+
+@kernel
+def _vision_axes(bias: np.ndarray) -> tuple[float, float]:
+    """``(cos psi, sin psi)`` of the vision frame's heading estimate: ``Rz(psi) = [[c, -s, 0], [s, c, 0],
+    [0, 0, 1]]`` takes V to NED."""
+    return np.cos(bias[B_VY]), np.sin(bias[B_VY])
+
+
+@kernel
+def vision_relative(s: np.ndarray, cfg: np.ndarray, bias: np.ndarray, ref: np.ndarray, dt: float) -> np.ndarray:
+    """``d = p(t_m) - o``: the body's NED metres from the vision frame's origin, ``dt`` s before the
+    solution (``p(t_m) = p - v dt``, the module docstring), the position as :func:`gnss_position` takes it
+    (metres per radian at the solution's latitude; the curvature over a camera's range, d^2 / 2R, is
+    below 0.1 m at 1 km)."""
+    lat, lon, h = sd.position(s, cfg, GEOGRAPHIC)
+    mn, me = metres_per_radian(s, cfg)
+    d = np.empty(3)
+    d[0] = (lat - ref[0]) * mn - s[sd.S_V] * dt - bias[B_VP]
+    d[1] = wrap_pi(lon - ref[1]) * me - s[sd.S_V + 1] * dt - bias[B_VP + 1]
+    d[2] = (ref[2] - h) - s[sd.S_V + 2] * dt - bias[B_VP + 2]
+    return d
+
+
+@kernel
+def vision_position(s: np.ndarray, cfg: np.ndarray, bias: np.ndarray, ref: np.ndarray, p_v: np.ndarray,
+                    dt: float, sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A camera's position ``p_v`` (m, in its frame V) measured ``dt`` s before the solution, 1-sigma per
+    axis ``sigma`` (m, in V). Predicted ``Rz(psi)^T d`` (d of :func:`vision_relative`); with the errors
+    estimate minus truth, ``Rz(psi + e)^T = Rz^T (I - e [z x])`` gives ``nu = Rz^T (dp - dt dv - do) - e Rz^T
+    [z x] d`` to first order: H is ``Rz^T`` on dp, ``-dt Rz^T`` on dv, ``-Rz^T`` on X_VP and ``-Rz^T (z x d)``
+    on X_VY, ``z x d = (-d_E, d_N, 0)`` (the same lever-free position model as :func:`gnss_position`, in a
+    rotated and shifted frame)."""
+    d = vision_relative(s, cfg, bias, ref, dt)
+    c, sn = _vision_axes(bias)
+    rt = np.array([[c, sn, 0.0], [-sn, c, 0.0], [0.0, 0.0, 1.0]])  # Rz(psi)^T
+    zd0, zd1 = -d[1], d[0]
+    nu = np.empty(3)
+    H = np.zeros((3, NX))
+    R = np.zeros((3, 3))
+    for i in range(3):
+        nu[i] = rt[i, 0] * d[0] + rt[i, 1] * d[1] + rt[i, 2] * d[2] - p_v[i]
+        for j in range(3):
+            H[i, X_DP + j] = rt[i, j]
+            H[i, X_DV + j] = -dt * rt[i, j]
+            H[i, X_VP + j] = -rt[i, j]
+        H[i, X_VY] = -(rt[i, 0] * zd0 + rt[i, 1] * zd1)
+        R[i, i] = sigma[i] * sigma[i]
+    return nu, H, R
+
+
+@kernel
+def vision_attitude(s: np.ndarray, bias: np.ndarray, c_vb: np.ndarray, sigma: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A camera's attitude ``c_vb`` (3 x 3, body FRD to its frame V), 1-sigma ``sigma`` (rad) about each body
+    axis. Its NED attitude is ``Rz(psi) c_vb``; with ``C(est) = (I + [phi x]) C`` and ``Rz(psi + e) = Rz (I +
+    e [z x])`` the product ``M = C(est) (Rz(psi) c_vb)^T = (I + [phi x]) (I - e [z x])`` is the rotation
+    ``phi - e z`` (first order). nu is M's rotation vector (exact for any angle: dcm_to_rotvec); H is I on
+    phi and ``-z`` on X_VY; R is the body-axis noise in NED, ``C diag(sigma^2) C^T``."""
+    cn = s[sd.S_C:sd.S_C + 9].reshape(3, 3)
+    c, sn = _vision_axes(bias)
+    meas = np.empty((3, 3))  # Rz(psi) c_vb: the camera's attitude in NED
+    for j in range(3):
+        meas[0, j] = c * c_vb[0, j] - sn * c_vb[1, j]
+        meas[1, j] = sn * c_vb[0, j] + c * c_vb[1, j]
+        meas[2, j] = c_vb[2, j]
+    nu = dcm_to_rotvec(matmul_bt(cn.copy(), meas))
+    H = np.zeros((3, NX))
+    R = np.zeros((3, 3))
+    for i in range(3):
+        H[i, X_PHI + i] = 1.0
+        for j in range(3):
+            for k in range(3):
+                R[i, j] += cn[i, k] * sigma[k] * sigma[k] * cn[j, k]
+    H[2, X_VY] = -1.0
+    return nu, H, R
+
+
+@kernel
+def vision_place(s: np.ndarray, cfg: np.ndarray, bias: np.ndarray, P: np.ndarray, ref: np.ndarray,
+                 p_v: np.ndarray, c_vb: np.ndarray, dt: float, sigma_p: np.ndarray, sigma_att: np.ndarray) -> None:
+    """Place the vision frame from one pose (its first, or the first after a ``reset_counter`` change): the
+    heading ``psi`` (from ``yaw(C) - yaw(c_vb)``, refined until the attitude innovation has no down component)
+    and origin ``o = p(t_m) - Rz(psi) p_v`` that make the pose's heading
+    and position innovations zero, and their covariance with the rest of the state by augmentation: with
+    the models' rows (:func:`vision_position`, :func:`vision_attitude`: ``0 = H_x x - e + n_z`` on the
+    heading row, ``0 = H_x x - Rz^T do + b e + n_p`` on the position rows, b the X_VY column), ``e = H_x x +
+    n_z`` and ``do = Rz (H_x x + b e + n_p)``: ``y = J x + L n``, so ``P_yx = J P``, ``P_yy = J P J^T + L N
+    L^T`` (stochastic cloning of the state; Roumeliotis & Burdick, ICRA 2002, eq. 10-12, the augmentation
+    of a state with a function of it). The pose's information is spent placing the frame, not fused."""
+    cn = s[sd.S_C:sd.S_C + 9]
+    bias[B_VY] = wrap_pi(np.arctan2(cn[3], cn[0]) - np.arctan2(c_vb[1, 0], c_vb[0, 0]))  # the Euler yaws equal
+    for _ in range(2):  # then the innovation's down component zero (its H on X_VY is -1): Newton steps
+        nu_a, _, _ = vision_attitude(s, bias, c_vb, sigma_att)
+        bias[B_VY] = wrap_pi(bias[B_VY] + nu_a[2])
+    for i in range(3):
+        bias[B_VP + i] = 0.0
+    d = vision_relative(s, cfg, bias, ref, dt)
+    c, sn = _vision_axes(bias)
+    bias[B_VP] = d[0] - (c * p_v[0] - sn * p_v[1])
+    bias[B_VP + 1] = d[1] - (sn * p_v[0] + c * p_v[1])
+    bias[B_VP + 2] = d[2] - p_v[2]
+    _, hp, rp = vision_position(s, cfg, bias, ref, p_v, dt, sigma_p)
+    _, ha, ra = vision_attitude(s, bias, c_vb, sigma_att)
+    rz = np.array([[c, -sn, 0.0], [sn, c, 0.0], [0.0, 0.0, 1.0]])
+    b = hp[:, X_VY].copy()
+    J = np.zeros((4, NX))
+    for j in range(NX):
+        if j < X_VP or j > X_VY:
+            J[3, j] = ha[2, j]
+            for i in range(3):
+                for k in range(3):
+                    J[i, j] += rz[i, k] * (hp[k, j] + b[k] * ha[2, j])
+    sz2 = ra[2, 2]
+    rb = mat_vec(rz, b)
+    N = np.zeros((4, 4))
+    for i in range(3):
+        for j in range(3):
+            N[i, j] = rb[i] * rb[j] * sz2
+            for k in range(3):
+                N[i, j] += rz[i, k] * rp[k, k] * rz[j, k]
+        N[i, 3] = rb[i] * sz2
+        N[3, i] = rb[i] * sz2
+    N[3, 3] = sz2
+    jp = matmul(J, P)
+    pyy = matmul_bt(jp, J)
+    for a in range(4):
+        ya = X_VP + a
+        for j in range(NX):
+            if j < X_VP or j > X_VY:
+                P[ya, j] = jp[a, j]
+                P[j, ya] = jp[a, j]
+        for k in range(4):
+            P[ya, X_VP + k] = pyy[a, k] + N[a, k]
 
 
 @kernel

@@ -22,7 +22,7 @@ from ..core import strapdown as sd
 from ..core.jit import for_frame
 from ..core.records import ImuSample, Solution
 from ..core.settings import Strapdown, strapdown_of
-from .livefilter import GNSS_HEADING, GNSS_YAW_PENDING, FilterSettings, LiveFilter
+from .livefilter import GNSS_HEADING, GNSS_YAW_PENDING, VISION_HEADING, FilterSettings, LiveFilter
 from ..core.rotation import euler_to_dcm
 
 
@@ -32,7 +32,7 @@ class State(str, Enum):
     NAVIGATING = "NAVIGATING"
 
 
-HEADING_WORDS = ("auto", "gyrocompass", "mag", "vehicle")
+HEADING_WORDS = ("auto", "gyrocompass", "mag", "vehicle", "vision")
 GNSS_YAW = "GNSS velocity"  # the heading source once the yaw estimator (core/yawgsf.py) has converged
 GSF_RESET_SIGMA_DEG = 5.0  # deg: the estimator's yaw 1-sigma below which the solution's heading is reset to it
 GSF_MOVING_MS = 1.0  # m/s: while the yaw is pending, faster fixes are not fused (the heading is unknown)
@@ -114,6 +114,7 @@ class Engine:
     _row: np.ndarray = field(init=False, default_factory=lambda: np.zeros(sd.OUT_SIZE))
     _unix_date: float | None = field(init=False, default=None)  # s: UNIX time the stream reported (SYSTEM_TIME)
     _antenna_yaw: float | None = field(init=False, default=None)  # rad: the vehicle's heading from the latest GNSS yaw
+    _vision_yaw: float | None = field(init=False, default=None)  # rad: the latest camera attitude's heading, in its frame
     declination: float = field(init=False, default=0.0)  # deg: the one used by the alignment and the filter
     _gsf: tuple[np.ndarray, np.ndarray, np.ndarray] | None = field(init=False, default=None)  # yaw bank (X, P, logw)
     _last_fix: tuple[float, float, float, float, float, float] | None = field(init=False, default=None)  # while pending
@@ -137,7 +138,8 @@ class Engine:
         if None not in (self.cfg.lat, self.cfg.lon, self.cfg.alt):
             self.set_position(float(self.cfg.lat), float(self.cfg.lon), float(self.cfg.alt), "options")  # type: ignore[arg-type]
         else:
-            self._event("INFO", "WAITING: for an initial position (--lat/--lon/--alt or the vehicle's GPS)")
+            self._event("INFO", "WAITING: for an initial position (--lat/--lon/--alt, the vehicle's GPS or its "
+                                "GPS_GLOBAL_ORIGIN)")
 
     # -- inputs besides the IMU ------------------------------------------------
     def set_position(self, lat: float, lon: float, alt: float, source: str, sigma: float | None = None) -> None:
@@ -334,6 +336,11 @@ class Engine:
                 return self._vehicle_yaw, "vehicle ATTITUDE"
         if h == "auto" and self._antenna_yaw is not None:
             return self._antenna_yaw, GNSS_HEADING
+        if h == "vision" or (h == "auto" and not has_mag and self._vision_yaw is not None
+                             and "vision" in self.cfg.filter.aiding and "gnss" not in self.cfg.filter.aiding):
+            if self._vision_yaw is not None:  # without GNSS or a magnetometer nothing knows north better
+                return self._vision_yaw, VISION_HEADING
+            self._event("WARNING", "no camera attitude seen: heading from gyrocompass")
         if h == "mag" or (h == "auto" and has_mag):
             if has_mag:
                 return align.mag_heading(m_mean, roll, pitch, math.radians(self.declination)), "magnetometer"
@@ -510,6 +517,18 @@ class Engine:
         if self.state is State.NAVIGATING and self._s is not None:
             self.filter.measure(self._s, self._kcfg, sd.state_time(self._s) if t is None else t,
                                 "vision_body" if body else "vision_vel", vel, sigma)
+
+    def on_vision_pose(self, t: float | None, p_v: tuple[float, float, float], c_vb: np.ndarray | None,
+                       sigma_p: tuple[float, float, float], sigma_att: tuple[float, float, float], reset: int) -> None:
+        """A camera's pose in its own local frame (position m; attitude ``c_vb`` body FRD -> frame or None;
+        1-sigmas m and rad per axis; ``reset`` the frame's reset_counter), measured at t. Before navigation
+        its heading is a heading source (``--heading vision``, or ``auto`` with vision and neither GNSS nor
+        a magnetometer); while navigating a pose measurement (LiveFilter: the first places the frame)."""
+        if c_vb is not None:
+            self._vision_yaw = math.atan2(c_vb[1, 0], c_vb[0, 0])
+        if self.state is State.NAVIGATING and self._s is not None:
+            self.filter.measure(self._s, self._kcfg, sd.state_time(self._s) if t is None else t,
+                                "vision_pose", p_v, c_vb, sigma_p, sigma_att, reset)
 
     def _output_due(self, t: float) -> bool:
         """One output set each time sensor time crosses a multiple of 1/rate (docs/conventions.md

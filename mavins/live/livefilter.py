@@ -27,12 +27,13 @@ from .smoothing import EpochLog
 
 AIDING_KINDS = ("gnss", "baro", "mag", "zupt", "nhc", "wheel", "vision")
 # the --aiding kind a measurement comes with where its name differs (a dual-antenna heading with GNSS)
-AIDING_OF = {"gnss_yaw": "gnss", "vision_vel": "vision", "vision_body": "vision"}
+AIDING_OF = {"gnss_yaw": "gnss", "vision_vel": "vision", "vision_body": "vision", "vision_pose": "vision"}
 ABS_TIMEOUT_S = 5.0  # s of sensor time after the last accepted fix during which position counts as absolute
 GNSS_LOST_S = 3.0  # s without an accepted fix after which GNSS is reported lost
 JUMP_M = 1.0  # m: an accepted position correction above this is a discontinuity (reset_counter)
 GNSS_HEADING = "GNSS yaw"  # heading source: a dual-antenna receiver's heading (GPS_RAW_INT yaw)
 GNSS_YAW_PENDING = "GNSS velocity (pending)"  # heading source: none yet, found from GNSS velocity once moving
+VISION_HEADING = "vision"  # heading source: a camera's attitude in its own frame (its x axis taken as north)
 
 
 def _column(first: str) -> slice:
@@ -65,6 +66,8 @@ class FilterSettings:
     sigma_wheel: float = aided.DEFAULT_SIGMA_WHEEL  # m/s: the odometer's speed noise
     wheel_scale: float = aided.DEFAULT_WHEEL_SCALE  # its scale factor's initial 1-sigma (estimated with wheel aiding)
     sigma_nhc: float = aided.DEFAULT_SIGMA_NHC  # m/s: the non-holonomic constraint's sideways and vertical body velocity
+    vision_drift: float = aided.DEFAULT_VISION_DRIFT  # m/sqrt(s): random walk of a camera frame's origin
+    vision_yaw_drift: float = aided.DEFAULT_VISION_YAW_DRIFT  # deg/sqrt(h): random walk of its heading
     predict_dt: float = 0.01  # s: the covariance is propagated at about this interval
     delays: dict[str, float] = field(default_factory=dict)  # s by kind (gnss, baro, mag): measured this long before its stamp
     smooth: bool = False  # keep the smoother's epochs (EpochLog) for a fixed-interval smoothed solution afterwards
@@ -90,7 +93,9 @@ class LiveFilter:
                 raise ValueError(f"aiding kinds are {', '.join(AIDING_KINDS)} (or none), got {k!r}")
         st = self.settings
         self.spec = errmodel.make_spec(st.spec, scale_factors=st.scale_factors, misalignment=st.misalignment,
-                                       wheel_scale=st.wheel_scale if "wheel" in st.aiding else 0.0)
+                                       wheel_scale=st.wheel_scale if "wheel" in st.aiding else 0.0,
+                                       vision_drift=st.vision_drift,
+                                       vision_yaw_drift=math.radians(st.vision_yaw_drift) / 60.0)
         self.lever = np.asarray(st.lever_arm, dtype=float).reshape(3)
         self.wheel_lever = np.asarray(st.wheel_lever_arm, dtype=float).reshape(3)
         self.P = np.zeros((errmodel.NX, errmodel.NX))
@@ -112,6 +117,9 @@ class LiveFilter:
         self.free = kalman.ALL  # the states an update may correct (kalman.update); the engine holds the heading back
         self._kept = False  # whether the measurement being applied changed the filter (_apply)
         self.epochs: EpochLog | None = None  # the smoother's epochs since the last start (settings.smooth)
+        self.vision_ref: np.ndarray | None = None  # lat, lon (rad), h (m): where the vision frame's origin is counted from
+        self.vision_frame: int | None = None  # the reset_counter of the camera frame placed (None: none placed)
+        self._placed = False  # whether the measurement being applied placed a camera frame (_apply)
         self._bind(sd.GEOGRAPHIC)
 
     def _bind(self, frame: int) -> None:
@@ -154,6 +162,8 @@ class LiveFilter:
         self.ratios.clear()
         self.last_pos_t = self.last_hgt_t = -math.inf
         self.glitch = False
+        self.vision_ref = None
+        self.vision_frame = None
 
     def restart_epochs(self, s: np.ndarray) -> None:
         """A new smoother log from the state s on (at every start, and after a reset that moved the
@@ -180,6 +190,8 @@ class LiveFilter:
             return min(5.0, self.settings.sigma_yaw)
         if source == GNSS_HEADING:  # a dual-antenna receiver: about 1 deg
             return min(2.0, self.settings.sigma_yaw)
+        if source == VISION_HEADING:  # the camera frame's x axis as north: true only as far as it was set up so
+            return self.settings.sigma_yaw
         if source == GNSS_YAW_PENDING:  # any heading, uniform on the circle
             return 180.0 / math.sqrt(3.0)
         if source == "gyrocompass":
@@ -252,10 +264,12 @@ class LiveFilter:
             self._flush_kernel(s, cfg, self.spec, self.P, self.acc)
             s0, b0 = s.copy(), self.bias.copy()
         P0, acc0 = self.P.copy(), self.acc.copy()
-        self._kept = False
+        self._kept = self._placed = False
         self._measure(s, cfg, t_m, kind, args)
         aided.keep_or_undo(self._kept, self.P, self.acc, P0, acc0)
-        if ep is not None and self._kept:
+        if ep is not None and self._placed:  # new states: the smoother's log starts again from here
+            self.restart_epochs(s)
+        elif ep is not None and self._kept:
             ep.record(sd.state_time(s), P0, self.P, self.acc, smoother.nominal_difference(s0, b0, s, self.bias, cfg))
 
     def _measure(self, s: np.ndarray, cfg: np.ndarray, t_m: float, kind: str, args: tuple) -> None:
@@ -324,8 +338,38 @@ class LiveFilter:
             vel, sigma = args
             self._update(s, cfg, "vision_vel", ("vel",), kalman.body_velocity(
                 s, np.asarray(vel, dtype=float), np.asarray(sigma, dtype=float)))
+        elif kind == "vision_pose":
+            self._vision_pose(s, cfg, late, *args)
         elif kind == "nhc":  # a wheeled vehicle: no sideways and no vertical body velocity
             self._update(s, cfg, "nhc", ("vel",), kalman.nhc(s, self.settings.sigma_nhc))
+
+    def _vision_pose(self, s: np.ndarray, cfg: np.ndarray, late: float, p_v: tuple, c_vb: np.ndarray | None,
+                     sigma_p: tuple, sigma_att: tuple, reset: int) -> None:
+        """A camera's pose in its own frame (position m, attitude body -> frame, 1-sigmas m and rad per axis),
+        ``reset`` its frame's reset_counter: the first pose of a frame places it (kalman.vision_place: counted
+        ``vision_frame_placed``; it needs the attitude), the next ones are fused, position and attitude in one
+        update (kalman.vision_position, kalman.vision_attitude); the reference point is the solution's
+        position at the first placement."""
+        p = np.asarray(p_v, dtype=float)
+        sp = np.asarray(sigma_p, dtype=float)
+        sa = np.asarray(sigma_att, dtype=float)
+        if self.vision_frame != reset:
+            if c_vb is None:
+                self.counters["vision_pose_unplaced"] += 1  # no attitude to place the frame with: the next pose
+                return
+            if self.vision_ref is None:
+                self.vision_ref = np.array(self._position_kernel(s, cfg))
+            kalman.vision_place(s, cfg, self.bias, self.P, self.vision_ref, p, c_vb, late, sp, sa)
+            self.vision_frame = reset
+            self._kept = self._placed = True
+            self.counters["vision_frame_placed"] += 1
+            return
+        nu, H, R = kalman.vision_position(s, cfg, self.bias, self.vision_ref, p, late, sp)
+        if c_vb is not None:
+            nu_a, H_a, R_a = kalman.vision_attitude(s, self.bias, c_vb, sa)
+            nu, H = np.concatenate((nu, nu_a)), np.vstack((H, H_a))
+            R = np.block([[R, np.zeros((3, 3))], [np.zeros((3, 3)), R_a]])
+        self._update(s, cfg, "vision_pose", ("pos", "hgt"), (nu, H, R))
 
     def _update(self, s: np.ndarray, cfg: np.ndarray, kind: str, ratio_keys: tuple[str, ...],
                 model: tuple[np.ndarray, np.ndarray, np.ndarray]) -> bool:
@@ -383,7 +427,8 @@ def warm_measurements() -> None:
     f.start(s, cfg, np.zeros(3), 0.01)
     for kind, args in (("zupt", ()), ("nhc", ()), ("gnss", (math.radians(45.0), math.radians(7.0), 100.0, (0.0, 0.0, 0.0), 1.0, 2.0, 0.3)),
                        ("gnss", (math.radians(45.0), math.radians(7.0), 100.0, (0.0, 0.0, math.nan), 1.0, 2.0, 0.3)),
-                       ("baro", (100.0, 0.5)), ("mag", ((0.2, 0.0, 0.4),)), ("gnss_yaw", (0.1, 0.02))):
+                       ("baro", (100.0, 0.5)), ("mag", ((0.2, 0.0, 0.4),)), ("gnss_yaw", (0.1, 0.02)),
+                       *[("vision_pose", ((1.0, 2.0, 0.5), np.eye(3), (0.1,) * 3, (0.02,) * 3, 0))] * 2):
         f.measure(s, cfg, 0.0, kind, *args)
     # the heading from GNSS velocity (GNSS_YAW_PENDING): the yaw bank and the reset
     from ..core import yawgsf

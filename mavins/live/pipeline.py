@@ -20,10 +20,12 @@ from ..core import aided
 from ..core import strapdown as sd
 from ..core.frames import local_ned
 from ..core.records import ImuSample, Solution
+from ..core.rotation import euler_to_dcm, quat_to_dcm
 from .engine import Engine, EngineConfig
 from .imuset import ImuSet
 from ..link.ingest import IMU_MESSAGES, Ingest, IngestConfig
 from ..link.mavlink import mavlink
+from ..link.publish import COV_DIAG
 from ..record.sink import Sink
 
 log = logging.getLogger("mavins")
@@ -44,6 +46,10 @@ GPS_FIX_3D, GPS_FIX_PPP = 3, 8  # GPS_FIX_TYPE: 3D fix .. PPP are fixes; other v
 WHEEL_MAX_GAP_S = 1.0  # s: two WHEEL_DISTANCE messages further apart give no speed (a gap, counted)
 VISION_SIGMA_VEL = 0.1  # m/s: a camera's velocity without a covariance (docs/filter.md)
 VISION_NED_FRAMES = (mavlink.MAV_FRAME_LOCAL_NED,)  # ODOMETRY velocity frames taken as NED
+VISION_POSE_FRAMES = (mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_LOCAL_FRD)  # ODOMETRY pose frames: z down
+VISION_SIGMA_POS = 0.1  # m: a camera's position without a covariance (docs/filter.md)
+VISION_SIGMA_ATT = math.radians(2.0)  # rad: its attitude without one
+ORIGIN_MESSAGES = ("GPS_GLOBAL_ORIGIN", "SET_GPS_GLOBAL_ORIGIN")  # the local frame's origin: a start without GNSS
 
 
 @dataclass
@@ -135,10 +141,21 @@ class Pipeline:
                                 BARO_SIGMA_M)
         elif name == "WHEEL_DISTANCE":
             self._wheel_distance(msg)
-        elif name in ("VISION_SPEED_ESTIMATE", "ODOMETRY"):
+        elif name == "VISION_SPEED_ESTIMATE":
             self._vision_velocity(name, msg)
+        elif name == "ODOMETRY":  # a pose, a velocity or both (NaN x, NaN vx: not given)
+            self._vision_reset_seen(int(msg.reset_counter))  # type: ignore[attr-defined]
+            if math.isnan(msg.x) and math.isnan(msg.vx):  # type: ignore[attr-defined]
+                self.counters["vision_empty"] += 1
+            if not math.isnan(msg.vx):  # type: ignore[attr-defined]
+                self._vision_velocity(name, msg)
+            if not math.isnan(msg.x):  # type: ignore[attr-defined]
+                self._vision_pose(name, msg)
         elif name == "VISION_POSITION_ESTIMATE":
-            self.counters["vision_position_unused"] += 1  # a local position: not fused yet (docs/filter.md)
+            self._vision_pose(name, msg)
+        elif name in ORIGIN_MESSAGES and (msg.latitude or msg.longitude):  # type: ignore[attr-defined]
+            self.engine.set_position(msg.latitude * 1e-7, msg.longitude * 1e-7,  # type: ignore[attr-defined]
+                                     msg.altitude / 1000.0 + self.engine_cfg.geoid_height, name)  # type: ignore[attr-defined]
         elif name == "SYSTEM_TIME" and msg.time_unix_usec:  # type: ignore[attr-defined]
             self.engine.set_date(msg.time_unix_usec * 1e-6)  # type: ignore[attr-defined]
         elif name == "GLOBAL_POSITION_INT" and (msg.lat or msg.lon):  # type: ignore[attr-defined]
@@ -244,10 +261,8 @@ class Pipeline:
         if not all(math.isfinite(v) for v in vel):
             self.counters["vision_invalid"] += 1
             return
-        reset = int(msg.reset_counter)  # type: ignore[attr-defined]
-        if self._vision_reset is not None and reset != self._vision_reset:
-            self.counters["vision_resets"] += 1
-        self._vision_reset = reset
+        if name != "ODOMETRY":  # ODOMETRY's is seen once for its pose and velocity (handle)
+            self._vision_reset_seen(int(msg.reset_counter))  # type: ignore[attr-defined]
         if math.isfinite(var[0]):
             if not all(math.isfinite(v) and v > 0.0 for v in var):
                 self.counters["vision_invalid"] += 1
@@ -257,6 +272,48 @@ class Pipeline:
             sig = (VISION_SIGMA_VEL,) * 3
         self.engine.on_vision_velocity(self._on_imu_clock(t), tuple(float(v) for v in vel),  # type: ignore[arg-type]
                                        sig if body else max(sig), body)
+
+    def _vision_reset_seen(self, reset: int) -> None:
+        """Count a camera's ``reset_counter`` change once (``vision_resets``), whichever message brings it."""
+        if self._vision_reset is not None and reset != self._vision_reset:
+            self.counters["vision_resets"] += 1
+        self._vision_reset = reset
+
+    def _vision_pose(self, name: str, msg: object) -> None:
+        """VISION_POSITION_ESTIMATE (usec, x y z m, roll pitch yaw rad, covariance[21]) or ODOMETRY (time_usec,
+        x y z in ``frame_id`` LOCAL_NED or LOCAL_FRD, q body -> frame w x y z, pose_covariance[21]): a camera's
+        pose in its own local frame, whose origin and heading the filter estimates (docs/filter.md). The
+        covariances are upper triangles of 6 x 6 (x y z roll pitch yaw), their diagonals used; a NaN first
+        element means unknown (VISION_SIGMA_POS, VISION_SIGMA_ATT). An ODOMETRY in another frame counts ``vision_frame_unsupported``,
+        a non-finite value or variance ``vision_invalid``; an attitude given as unknown (NaN) leaves the
+        position alone (``vision_pose`` with no attitude)."""
+        if name == "ODOMETRY":
+            pos = (msg.x, msg.y, msg.z)  # type: ignore[attr-defined]
+            if msg.frame_id not in VISION_POSE_FRAMES:  # type: ignore[attr-defined]
+                self.counters["vision_frame_unsupported"] += 1
+                return
+            t, q, cov = msg.time_usec * 1e-6, tuple(msg.q), msg.pose_covariance  # type: ignore[attr-defined]
+            c_vb = None if math.isnan(q[0]) else quat_to_dcm(np.array(q, dtype=float) / math.sqrt(sum(v * v for v in q)))
+        else:
+            t, pos, cov = msg.usec * 1e-6, (msg.x, msg.y, msg.z), msg.covariance  # type: ignore[attr-defined]
+            e = (msg.roll, msg.pitch, msg.yaw)  # type: ignore[attr-defined]
+            c_vb = euler_to_dcm(*e) if all(math.isfinite(v) for v in e) else None
+            self._vision_reset_seen(int(msg.reset_counter))  # type: ignore[attr-defined]
+        if not all(math.isfinite(v) for v in pos) or (c_vb is not None and not np.all(np.isfinite(c_vb))):
+            self.counters["vision_invalid"] += 1
+            return
+        var = [cov[i] for i in COV_DIAG]
+        if math.isfinite(var[0]):
+            if not all(math.isfinite(v) and v > 0.0 for v in var[:3]) or (
+                    c_vb is not None and not all(math.isfinite(v) and v > 0.0 for v in var[3:])):
+                self.counters["vision_invalid"] += 1
+                return
+            sig_p = tuple(math.sqrt(v) for v in var[:3])
+            sig_a = tuple(math.sqrt(v) for v in var[3:]) if c_vb is not None else (VISION_SIGMA_ATT,) * 3
+        else:
+            sig_p, sig_a = (VISION_SIGMA_POS,) * 3, (VISION_SIGMA_ATT,) * 3
+        self.engine.on_vision_pose(self._on_imu_clock(t), tuple(float(v) for v in pos), c_vb,  # type: ignore[arg-type]
+                                   sig_p, sig_a, self._vision_reset or 0)
 
     def _on_imu_clock(self, t: float | None) -> float | None:
         """A message's own time if it is on the IMU's clock (within CLOCK_MATCH_S of the last

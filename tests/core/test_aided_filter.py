@@ -60,7 +60,7 @@ from mavins.core.rotation import dcm_to_euler, euler_to_dcm, quat_to_dcm, rotvec
 from sim import aiding, errors
 from sim.generate import generate
 from sim.scenarios import Scenario, load
-from support import NO_SMOOTHING, quat_error, wrap_rad
+from support import NO_SMOOTHING, Z975, Z995, chi2_quantile, consumer_stochastic, quat_error, wrap_rad
 
 N_RUNS = 50
 DURATION = 120.0
@@ -68,14 +68,8 @@ RATE = 100.0
 GNSS = aiding.GnssConfig(rate=1.0, sigma_h=1.0, sigma_v=1.5, sigma_vel=0.1)
 INIT_SIGMA = {"sigma_pos": 3.0, "sigma_vel": 0.3, "sigma_level": 0.05, "sigma_yaw": 3.0}
 STATIC = [(0.0, 10.0)]
-Z975 = 1.959963984540054
-Z995 = 2.5758293035489004
 
 
-def chi2_quantile(z: float, k: float) -> float:
-    """Wilson-Hilferty: the chi-square(k) quantile at the standard normal quantile z."""
-    c = 2.0 / (9.0 * k)
-    return k * (1.0 - c + z * math.sqrt(c)) ** 3
 
 
 def band(dof: int, n: int, z: float = Z975) -> tuple[float, float]:
@@ -95,15 +89,6 @@ def test_wilson_hilferty_against_tabulated_quantiles() -> None:
     assert chi2_quantile(Z975, 3) == pytest.approx(9.348, rel=1e-2)
 
 
-def consumer_stochastic(grade: str = "consumer") -> errors.ImuErrorModel:
-    """The grade (consumer by default) without the errors outside the filter's model."""
-    m = errors.grade(grade)
-    zero33 = ((0.0, 0.0, 0.0),) * 3
-
-    def strip(s: errors.SensorErrorModel) -> errors.SensorErrorModel:
-        return dataclasses.replace(s, scale_factor_ppm=(0.0, 0.0, 0.0), misalignment=zero33)
-
-    return dataclasses.replace(m, gyro=strip(m.gyro), accel=strip(m.accel), g_sensitivity=zero33, drop_probability=0.0)
 
 
 MODEL = consumer_stochastic()

@@ -23,20 +23,16 @@ from mavins.core import aided
 from sim import aiding, errors
 from sim.generate import generate
 from sim.scenarios import Scenario, load
-from test_aided_filter import consumer_stochastic, nav_errors, perturbed_init
+from support import Z995, chi2_quantile, consumer_stochastic
+from test_aided_filter import nav_errors, perturbed_init
 
 RUNS = 10
 OUTAGE = (60.0, 360.0)
 LEVER = (-1.2, 0.5, 0.4)
 SCALE_SIGMA = aided.DEFAULT_WHEEL_SCALE
 SIGMAS = {"sigma_pos": 2.0, "sigma_vel": 0.1, "sigma_level": 0.05, "sigma_yaw": 0.5}
-Z995 = 2.5758293035489004
 
 
-def chi2_quantile(z: float, k: float) -> float:
-    """Wilson-Hilferty: the chi-square(k) quantile at the standard normal quantile z."""
-    c = 2.0 / (9.0 * k)
-    return k * (1.0 - c + z * math.sqrt(c)) ** 3
 
 
 MODEL = consumer_stochastic("industrial")  # the industrial grade without the errors outside the model

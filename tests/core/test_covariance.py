@@ -70,7 +70,7 @@ def sig(P: np.ndarray) -> dict[str, np.ndarray]:
 
 def typed_sources(s: cov.AnalysisSpec) -> dict[str, tuple[tuple[int, ...], tuple[float, ...], tuple[float, ...]]]:
     """(states, p0, q) of each source, from the layout of the module docstring: bg 9-11, ba 12-14, gg 15-17,
-    ga 18-20, K_g[i, j] at 44 + 3 i + j, K_a[i, j] at 53 + 3 i + j; q over the nine navigation states then the
+    ga 18-20, K_g[i, j] at 48 + 3 i + j, K_a[i, j] at 57 + 3 i + j; q over the nine navigation states then the
     source's own (white noise on phi for the gyro, on dv for the accelerometer)."""
     i = s.imu
     z9 = (0.0,) * 9
@@ -79,14 +79,14 @@ def typed_sources(s: cov.AnalysisSpec) -> dict[str, tuple[tuple[int, ...], tuple
         "gyro_instability": ((15, 16, 17), (i.gyro_gm**2,) * 3, z9 + (2.0 * i.gyro_gm**2 / i.gyro_tau,) * 3),
         "gyro_rate_random_walk": ((9, 10, 11), (0.0,) * 3, z9 + (i.gyro_rrw**2,) * 3),
         "gyro_random_walk": ((), (), (i.gyro_arw**2,) * 3 + (0.0,) * 6),
-        "gyro_scale": ((44, 48, 52), (s.gyro_scale**2,) * 3, (0.0,) * 12),
-        "gyro_misalignment": ((45, 46, 47, 49, 50, 51), (s.gyro_misalignment**2,) * 6, (0.0,) * 15),
+        "gyro_scale": ((48, 52, 56), (s.gyro_scale**2,) * 3, (0.0,) * 12),
+        "gyro_misalignment": ((49, 50, 51, 53, 54, 55), (s.gyro_misalignment**2,) * 6, (0.0,) * 15),
         "accel_bias": ((12, 13, 14), (i.accel_bias**2,) * 3, (0.0,) * 12),
         "accel_instability": ((18, 19, 20), (i.accel_gm**2,) * 3, z9 + (2.0 * i.accel_gm**2 / i.accel_tau,) * 3),
         "accel_rate_random_walk": ((12, 13, 14), (0.0,) * 3, z9 + (i.accel_rrw**2,) * 3),
         "accel_random_walk": ((), (), (0.0,) * 3 + (i.accel_vrw**2,) * 3 + (0.0,) * 3),
-        "accel_scale": ((53, 57, 61), (s.accel_scale**2,) * 3, (0.0,) * 12),
-        "accel_misalignment": ((54, 55, 56, 58, 59, 60), (s.accel_misalignment**2,) * 6, (0.0,) * 15),
+        "accel_scale": ((57, 61, 65), (s.accel_scale**2,) * 3, (0.0,) * 12),
+        "accel_misalignment": ((58, 59, 60, 62, 63, 64), (s.accel_misalignment**2,) * 6, (0.0,) * 15),
     }
 
 
@@ -144,9 +144,9 @@ def reference(tr: cov.TrackMeans, s: cov.AnalysisSpec, states, p0, q, earth_on: 
 
 
 def test_layout_units_and_column_names() -> None:
-    """The augmented layout of the module docstring (K_g at 44.., K_a at 53.., 62 states: after the filter's 44),
+    """The augmented layout of the module docstring (K_g at 48.., K_a at 57.., 66 states: after the filter's 48),
     the ppm and arcsec units and the contract's source and column names in their documented order."""
-    assert (cov.NNAV, cov.X_KG, cov.X_KA, cov.NA) == (9, 44, 53, 62)
+    assert (cov.NNAV, cov.X_KG, cov.X_KA, cov.NA) == (9, 48, 57, 66)
     assert cov.PPM == 1e-6
     assert cov.ARCSEC == pytest.approx(math.pi / 648000.0, rel=1e-15, abs=0)  # 1/3600 deg
     assert cov.ANALYSIS_KEYS == ("gyro_misalignment", "accel_misalignment")

@@ -92,7 +92,8 @@ def test_imu_spec_is_checked_and_made_float() -> None:
 def test_as_array_puts_each_figure_at_its_index() -> None:
     s = em.ImuSpec(1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 12.0, 13.0, 14.0, 15.0)
     sp = s.as_array(11.0)
-    assert sp.shape == (em.SP_SIZE,) and em.SP_SIZE == 16 and sp[em.SP_WHEEL_SCALE] == 0.0
+    assert sp.shape == (em.SP_SIZE,) and em.SP_SIZE == 18 and sp[em.SP_WHEEL_SCALE] == 0.0
+    assert sp[em.SP_VISION_DRIFT] == sp[em.SP_VISION_YAW_DRIFT] == 0.0
     expect = {em.SP_GYRO_ARW: 1.0, em.SP_GYRO_BIAS: 2.0, em.SP_GYRO_GM: 3.0, em.SP_GYRO_TAU: 4.0,
               em.SP_GYRO_RRW: 5.0, em.SP_ACC_VRW: 6.0, em.SP_ACC_BIAS: 7.0, em.SP_ACC_GM: 8.0,
               em.SP_ACC_TAU: 9.0, em.SP_ACC_RRW: 10.0, em.SP_BARO_DRIFT: 11.0, em.SP_GYRO_SCALE: 12.0,
@@ -101,7 +102,7 @@ def test_as_array_puts_each_figure_at_its_index() -> None:
         assert sp[i] == v
     assert s.as_array()[em.SP_BARO_DRIFT] == 0.0  # default: no baro drift
     # ImuSpec's defaults: no noise, no bias, tau 3600 s
-    np.testing.assert_array_equal(em.ImuSpec().as_array(), [0, 0, 0, 3600.0, 0, 0, 0, 0, 3600.0, 0, 0, 0, 0, 0, 0, 0])
+    np.testing.assert_array_equal(em.ImuSpec().as_array(), [0, 0, 0, 3600.0, 0, 0, 0, 0, 3600.0] + [0] * 9)
     assert s.as_array(3)[em.SP_BARO_DRIFT] == 3.0
 
 
@@ -962,13 +963,13 @@ def test_initial_covariance() -> None:
     spec = em.ImuSpec(gyro_bias=2.0, gyro_gm=3.0, gyro_tau=1.0, accel_bias=5.0, accel_gm=7.0, accel_tau=1.0).as_array()
     P = kf.initial_covariance(spec, 10.0, 0.5, 0.25, 4.0, 6.0, 0.0)
     d = np.array([0.0625, 0.0625, 16.0] + [0.25] * 3 + [100.0] * 3 + [4.0] * 3 + [25.0] * 3 + [9.0] * 3 + [49.0] * 3
-                 + [36.0] + [0.0] * 22)
+                 + [36.0] + [0.0] * 26)
     np.testing.assert_array_equal(P, np.diag(d))
     # the scale factors and misalignments take the spec's 1-sigma, the hard iron the sigma passed in
     spec = em.ImuSpec(gyro_scale=2e-3, accel_scale=3e-3, gyro_misalignment=4e-3, accel_misalignment=5e-3).as_array()
     P = kf.initial_covariance(spec, 10.0, 0.5, 0.25, 4.0, 6.0, 0.5)
     np.testing.assert_allclose(np.diag(P)[22:], [4e-6] * 3 + [9e-6] * 3 + [16e-6] * 6 + [25e-6] * 6 + [0.25] * 3
-                               + [0.0], rtol=1e-15)
+                               + [0.0] * 5, rtol=1e-15)  # the odometer, and a camera frame until it is placed
     # the wheel odometer's scale factor takes the spec's SP_WHEEL_SCALE
     spec = em.make_spec(em.ImuSpec(), wheel_scale=0.02)
     assert kf.initial_covariance(spec, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0)[em.X_WS, em.X_WS] == pytest.approx(4e-4,
@@ -980,13 +981,14 @@ def test_module_level_layout() -> None:
     """The constants mutmut does not mutate (module level), pinned by value: the state layout of docs/filter.md
     "State", the process-model vector of errmodel's docstring, and the bias vector of kalman's docstring."""
     assert (em.X_PHI, em.X_DV, em.X_DP, em.X_BG, em.X_BA, em.X_GG, em.X_GA, em.X_BARO) == (0, 3, 6, 9, 12, 15, 18, 21)
-    assert (em.X_SG, em.X_SA, em.X_MG, em.X_MA, em.X_MB, em.X_WS) == (22, 25, 28, 34, 40, 43)
-    assert em.NX == 44 and em.N_CONTRACT == 15
+    assert (em.X_SG, em.X_SA, em.X_MG, em.X_MA, em.X_MB, em.X_WS, em.X_VP, em.X_VY) == (22, 25, 28, 34, 40, 43, 44, 47)
+    assert em.NX == 48 and em.N_CONTRACT == 15
     assert (em.SP_GYRO_ARW, em.SP_GYRO_BIAS, em.SP_GYRO_GM, em.SP_GYRO_TAU, em.SP_GYRO_RRW, em.SP_ACC_VRW,
             em.SP_ACC_BIAS, em.SP_ACC_GM, em.SP_ACC_TAU, em.SP_ACC_RRW, em.SP_BARO_DRIFT, em.SP_GYRO_SCALE,
-            em.SP_ACC_SCALE, em.SP_GYRO_MIS, em.SP_ACC_MIS, em.SP_WHEEL_SCALE, em.SP_SIZE) == tuple(range(17))
+            em.SP_ACC_SCALE, em.SP_GYRO_MIS, em.SP_ACC_MIS, em.SP_WHEEL_SCALE, em.SP_VISION_DRIFT,
+            em.SP_VISION_YAW_DRIFT, em.SP_SIZE) == tuple(range(19))
     assert (kf.B_BG, kf.B_BA, kf.B_GG, kf.B_GA, kf.B_BARO, kf.B_SG, kf.B_SA, kf.B_MG, kf.B_MA, kf.B_MB, kf.B_WS,
-            kf.B_SIZE) == (0, 3, 6, 9, 12, 13, 16, 19, 25, 31, 34, 35)
+            kf.B_VP, kf.B_VY, kf.B_SIZE) == (0, 3, 6, 9, 12, 13, 16, 19, 25, 31, 34, 35, 38, 39)
     assert em.OFF_DIAGONAL == ((0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1))
     np.testing.assert_array_equal(kf.ALL, np.ones(em.NX))
     np.testing.assert_array_equal(kf.ALL_BUT_HEADING, np.r_[1.0, 1.0, 0.0, np.ones(em.NX - 3)])  # phi_D held back
@@ -998,9 +1000,10 @@ def test_the_state_is_declared_once() -> None:
     the blocks from the gyro bias on, and kalman's bias vector those blocks at the same places."""
     assert [(b.name, b.size) for b in em.STATE] == [("PHI", 3), ("DV", 3), ("DP", 3), ("BG", 3), ("BA", 3),
                                                     ("GG", 3), ("GA", 3), ("BARO", 1), ("SG", 3), ("SA", 3),
-                                                    ("MG", 6), ("MA", 6), ("MB", 3), ("WS", 1)]
+                                                    ("MG", 6), ("MA", 6), ("MB", 3), ("WS", 1), ("VP", 3),
+                                                    ("VY", 1)]
     assert [b.name for b in em.STATE if b.sensor] == ["BG", "BA", "GG", "GA", "BARO", "SG", "SA", "MG", "MA", "MB",
-                                                      "WS"]
+                                                      "WS", "VP", "VY"]
     assert em.X_SENSORS == 9 and kf.B_SIZE == em.NX - em.X_SENSORS
     for b in em.STATE:
         assert getattr(em, f"X_{b.name}") == em.OFFSET[b.name]

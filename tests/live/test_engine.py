@@ -90,7 +90,8 @@ def test_bad_settings_are_refused():
 def test_states_and_initial_position():
     e = Engine(cfg(lat=None, lon=None, alt=None))
     assert e.state is State.WAITING and not e.position_known and e.origin is None
-    assert texts(e) == ["INFO WAITING: for an initial position (--lat/--lon/--alt or the vehicle's GPS)"]
+    assert texts(e) == ["INFO WAITING: for an initial position (--lat/--lon/--alt, the vehicle's GPS or its "
+                        "GPS_GLOBAL_ORIGIN)"]
     assert e.on_imu(rest(1.0)) is None
     assert e.state is State.WAITING
     e.set_position(47.5, 8.25, 500.0, "GPS_RAW_INT", 2.0)

@@ -21,18 +21,13 @@ from mavins.live.livefilter import GNSS_HEADING, FilterSettings
 from sim.aiding import GnssConfig, simulate_aiding
 from sim.generate import generate
 from sim.scenarios import load
-from support import feed_engine
+from support import Z975, chi2_quantile, feed_engine
 
 SIGMA_DEG = 0.5  # the receiver's heading 1-sigma (hdg_acc)
 N_RUNS = 10
 DURATION = 70.0
-Z975 = 1.959963984540054
 
 
-def chi2_quantile(z: float, k: float) -> float:
-    """Wilson-Hilferty: the chi-square(k) quantile at the standard normal quantile z."""
-    c = 2.0 / (9.0 * k)
-    return k * (1.0 - c + z * math.sqrt(c)) ** 3
 
 
 def fly(seed: int, heading_from: float = 0.0):  # type: ignore[no-untyped-def]

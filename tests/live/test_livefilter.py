@@ -106,8 +106,8 @@ def test_a_new_filter_holds_zeros_and_nothing_seen() -> None:
     """Before start: P 44 x 44 zero, the 35 sensor-error estimates zero, no ratios, nothing aided, no glitch, no
     resets; the spec is the settings' (60 deg/sqrt(h) = pi/180 rad/sqrt(s)); the lever arm as floats."""
     f = LiveFilter(FilterSettings(spec={"gyro_arw": 60.0}, lever_arm=(1, -2, 3)))
-    assert f.P.shape == (em.NX, em.NX) == (44, 44) and not f.P.any()
-    assert f.bias.shape == (kf.B_SIZE,) == (35,) and not f.bias.any()
+    assert f.P.shape == (em.NX, em.NX) == (48, 48) and not f.P.any()
+    assert f.bias.shape == (kf.B_SIZE,) == (39,) and not f.bias.any()
     assert f.acc.shape == (19,) and not f.acc.any() and f.sums.shape == (7,) and not f.sums.any()
     assert f.predict_every == 1 and f.resets == 0 and f.ratios == {} and not f.counters and f.events == []
     assert f.last_pos_t == -math.inf and f.last_hgt_t == -math.inf

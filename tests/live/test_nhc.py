@@ -21,17 +21,12 @@ from mavins.live.livefilter import FilterSettings
 from sim.aiding import GnssConfig, simulate_aiding
 from sim.generate import generate
 from sim.scenarios import load
-from support import feed_engine, horizontal_errors
+from support import Z975, chi2_quantile, feed_engine, horizontal_errors
 
 OUTAGE = (60.0, 120.0)
 SEEDS = (1, 2, 3, 4, 5)
-Z975 = 1.959963984540054
 
 
-def chi2_quantile(z: float, k: float) -> float:
-    """Wilson-Hilferty: the chi-square(k) quantile at the standard normal quantile z."""
-    c = 2.0 / (9.0 * k)
-    return k * (1.0 - c + z * math.sqrt(c)) ** 3
 
 
 def drive(seed: int, aiding: tuple[str, ...]):  # type: ignore[no-untyped-def]

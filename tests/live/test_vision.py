@@ -1,22 +1,30 @@
 """External vision on the live path: VISION_SPEED_ESTIMATE and ODOMETRY velocities from a camera or motion
 capture (live/pipeline.py) fused by the filter (kalman.gnss_velocity for NED, kalman.body_velocity for the body
-frame), and the loop guard: our own ODOMETRY coming back is never fused."""
+frame); ODOMETRY and VISION_POSITION_ESTIMATE poses in the camera's own frame, placed and then fused
+(kalman.vision_place, vision_position, vision_attitude) with a Monte Carlo of their consistency; a start
+without GNSS (GPS_GLOBAL_ORIGIN, the heading from the camera); and the loop guard: our own ODOMETRY coming back
+is never fused."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 import pytest
 
+from mavins.core import kalman as kf
+from mavins.core.records import ImuSample
+from mavins.core.rotation import quat_to_dcm
 from mavins.link.mavlink import mavlink
 from mavins.live.engine import Engine, EngineConfig
-from mavins.live.livefilter import FilterSettings
+from mavins.live.livefilter import VISION_HEADING, FilterSettings
 from mavins.live.pipeline import VISION_SIGMA_VEL, Pipeline
-from sim.aiding import GnssConfig, simulate_aiding, truth_at
+from sim import errors
+from sim.aiding import GnssConfig, VisionConfig, camera_pose, simulate_aiding, truth_at, vision
 from sim.generate import generate
-from sim.scenarios import load
-from support import feed_engine
+from sim.scenarios import Scenario, load
+from support import Z995, chi2_quantile, consumer_stochastic, feed_engine
 
 NAN = math.nan
 OWN = 191  # our component id (Pipeline.own_component, docs/service.md)
@@ -59,7 +67,8 @@ def test_vision_messages_become_velocities_with_their_sigmas(pipeline) -> None: 
     """ODOMETRY in BODY_FRD: a body velocity with a sigma per axis from the velocity covariance's diagonal (its
     upper-triangle indices 0, 6, 11), the default where the first is NaN; in LOCAL_NED: NED with the largest;
     VISION_SPEED_ESTIMATE: NED, covariance row-major 3 x 3 (0, 4, 8); another frame, a NaN velocity or a
-    non-positive variance counted and not used; a new reset_counter counted; a position not used (counted)."""
+    non-positive variance counted and not used (an unknown velocity, NaN vx, is not counted: the message
+    carries its pose alone); a new reset_counter counted."""
     p, seen = pipeline
     p.handle(encoded(lambda e: odometry(e, mavlink.MAV_FRAME_BODY_FRD, (1.0, 2.0, 3.0), 0.01)))
     p.handle(encoded(lambda e: odometry(e, mavlink.MAV_FRAME_BODY_FRD, (1.0, 2.0, 3.0))))
@@ -74,7 +83,7 @@ def test_vision_messages_become_velocities_with_their_sigmas(pipeline) -> None: 
                                      ((0.5, -0.5, 0.25), VISION_SIGMA_VEL, False)]
     assert p.counters["vision_resets"] == 1
     p.handle(encoded(lambda e: odometry(e, mavlink.MAV_FRAME_LOCAL_FRD, (1.0, 2.0, 3.0))))
-    p.handle(encoded(lambda e: odometry(e, mavlink.MAV_FRAME_BODY_FRD, (NAN, 2.0, 3.0))))
+    p.handle(encoded(lambda e: odometry(e, mavlink.MAV_FRAME_BODY_FRD, (NAN, 2.0, 3.0))))  # no velocity: pose only
     p.handle(encoded(lambda e: odometry(e, mavlink.MAV_FRAME_BODY_FRD, (1.0, 2.0, 3.0), -0.01)))
     p.handle(encoded(lambda e: e.vision_position_estimate_encode(3_000_000, 1.0, 2.0, 3.0, 0.0, 0.0, 0.0,
                                                                   [NAN] + [0.0] * 20, 0)))
@@ -84,7 +93,7 @@ def test_vision_messages_become_velocities_with_their_sigmas(pipeline) -> None: 
     p.handle(encoded(lambda e: odometry(e, mavlink.MAV_FRAME_BODY_FRD, (1.0, 2.0, 3.0), 0.01, reset=2)))
     assert len(seen) == 6
     assert (p.counters["vision_frame_unsupported"], p.counters["vision_invalid"],
-            p.counters["vision_position_unused"], p.counters["vision_resets"]) == (2, 4, 1, 3)  # resets 0-1-0-2
+            p.counters["vision_resets"]) == (2, 3, 3)  # resets 0-1-0-2
 
 
 def test_vision_is_stamped_on_the_imu_clock() -> None:
@@ -141,3 +150,74 @@ def test_a_cameras_velocity_holds_a_gnss_outage() -> None:
     assert rms[0] < rms[1] / 5.0, rms
     for _, eng in with_v:
         assert eng.filter.counters["vision_vel_rejected"] == 0 and eng.filter.counters["vision_vel_accepted"] > 2500
+
+
+# -- a camera's pose: the frame placed, then fused (kalman.vision_place, vision_position, vision_attitude) ----------
+POSE_RUNS = 16
+MODEL = consumer_stochastic()  # the consumer grade without the errors outside the filter's model
+CAMERA = VisionConfig(rate=30.0)  # 5 cm, 1 deg, a frame turned 30 deg from north, its origin at the start
+
+
+def pose_run(trajectory, seed: int):  # type: ignore[no-untyped-def]
+    """The quiet flight (100 s) through the engine with the consumer IMU's modelled errors (test_aided_filter's
+    MODEL) and a camera's pose alone (``--aiding vision``, no GNSS: the start from the given position, the
+    heading from the camera): at each output after the alignment the camera-frame position and attitude errors
+    (vision_position and vision_attitude's innovations against the true pose, noise-free) and their covariance
+    ``H P H^T``; and the engine."""
+    ex = trajectory.exact
+    t, dth, dv, _ = errors.apply(MODEL, ex.t, ex.dtheta, ex.dv, seed, t_start=ex.t0)
+    run = dataclasses.replace(trajectory, seed=seed, t=t, dtheta=dth, dv=dv)
+    cam = vision(run, CAMERA)
+    init = run.init()
+    eng = Engine(EngineConfig(lat=init.lat, lon=init.lon, alt=init.h, align=5.0,
+                              filter=FilterSettings(spec="consumer", aiding=("vision",), vision_drift=0.0,
+                                                    vision_yaw_drift=0.0)))
+    sig_p, sig_a = (CAMERA.sigma_pos,) * 3, (CAMERA.sigma_att,) * 3
+    start = (math.radians(ex.truth[0, 1]), math.radians(ex.truth[0, 2]), ex.truth[0, 3])
+    truth_cfg = dataclasses.replace(CAMERA, sigma_pos=0.0, sigma_att=0.0, sigma_vel=0.0)
+    w, f = run.rates()
+    z2, m, next_t = [], 0, 10.0
+    for i, ti in enumerate(t.tolist()):
+        while m < len(cam) and cam[m, 0] <= ti:
+            r = cam[m]
+            eng.on_vision_pose(float(r[0]), tuple(r[1:4]), quat_to_dcm(np.ascontiguousarray(r[4:8])), sig_p, sig_a, 0)
+            m += 1
+        sol = eng.on_imu(ImuSample(ti, tuple(w[i].tolist()), tuple(f[i].tolist()), None, 1, 1))
+        if sol is None or ti < next_t or ti > ex.truth[-1, 0]:  # (the last sample's time jitters past the end)
+            continue
+        next_t += 1.0
+        llh, vel, q, _ = truth_at(run, np.array([ti]))
+        true = camera_pose(llh, q, vel, start, truth_cfg, np.random.default_rng(0))[0]
+        flt, s = eng.filter, eng._s
+        nu_p, H_p, _ = kf.vision_position(s, eng._kcfg, flt.bias, flt.vision_ref, true[0:3], 0.0, np.ones(3))
+        nu_a, H_a, _ = kf.vision_attitude(s, flt.bias, np.ascontiguousarray(quat_to_dcm(true[3:7])), np.ones(3))
+        e, H = np.r_[nu_p, nu_a], np.vstack((H_p, H_a))
+        z2.append(float(e @ np.linalg.solve(H @ flt.P @ H.T, e)))
+    return np.array(z2), eng
+
+
+@pytest.fixture(scope="module")
+def quiet_flight():  # type: ignore[no-untyped-def]
+    sc = load("flight")
+    doc = {k: v for k, v in sc.doc.items() if k != "perturbations"}
+    return generate(Scenario("flight_quiet", sc.source, doc), duration=100.0, rate=100.0, seed=0, grade="ideal")
+
+
+@pytest.mark.plain_python_slow  # the flight through the engine, 16 times: minutes as plain Python (mutation runs)
+def test_a_cameras_pose_alone_is_fused_consistently(quiet_flight) -> None:  # type: ignore[no-untyped-def]
+    """16 runs of the quiet flight with the camera's pose as the only aiding: every pose after the first (which
+    places the frame) is accepted; the normalised squared error of the camera-frame pose (position and
+    attitude, 6 degrees of freedom) averaged over the runs lies in the 99 % band of chi2(6N)/N at every
+    second (Wilson-Hilferty), and its mean over the run in that band too (the time average has the same
+    mean and at most that spread)."""
+    runs = [pose_run(quiet_flight, 900 + r) for r in range(POSE_RUNS)]
+    for _, eng in runs:
+        c = eng.filter.counters
+        assert eng.heading_used == VISION_HEADING and c["vision_frame_placed"] == 1 and c["vision_pose_rejected"] == 0
+        assert c["vision_pose_accepted"] > 30 * 90
+    z2 = np.array([z for z, _ in runs])
+    k = 6 * POSE_RUNS
+    lo, hi = (chi2_quantile(z, k) / POSE_RUNS for z in (-Z995, Z995))
+    per_epoch = z2.mean(axis=0)
+    assert lo < per_epoch.mean() < hi, (per_epoch.mean(), lo, hi)
+    assert np.mean((per_epoch < lo) | (per_epoch > hi)) < 0.05, (np.round(per_epoch, 2), lo, hi)
