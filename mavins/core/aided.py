@@ -154,12 +154,41 @@ def _propagate(s: np.ndarray, cfg: np.ndarray, spec: np.ndarray, P: np.ndarray, 
     lat, lon, h = sd.position(s, cfg, frame)
     F = em.system_matrix(c, s[sd.S_V : sd.S_V + 3], lat, h, f_n, spec, cfg[sd.CFG_EARTH] > 0.5)
     em.motion_columns(F, c, acc[13:16] / T, acc[16:19] / T, spec)
-    phi, qd = em.discretise(F, spec, T)
-    kf.predict(P, phi, qd)
+    predict_active(P, F, em.noise_density(spec), T)
     if acc.shape[0] >= ACC_SIZE + NX * NX:  # a smoothed run: the transition since the last epoch (smoother.py)
-        sm.chain_transition(acc[ACC_SIZE:], phi)
+        sm.chain_transition(acc[ACC_SIZE:], em.transition(F, T))
     for i in range(ACC_SIZE):
         acc[i] = 0.0
+
+
+@kernel
+def predict_active(P: np.ndarray, F: np.ndarray, q: np.ndarray, T: float) -> None:
+    """``P <- Phi P Phi^T + Qd`` over T seconds (errmodel.discretise_density, kalman.predict) on the states that
+    take part: the navigation errors and every state with variance or driving noise. A state with neither
+    (not estimated: a zero 1-sigma, a camera frame not placed) has a zero row and column in P, and its row of
+    F is at most its own diagonal (errmodel: the sensor errors are random constants, walks or first-order
+    Gauss-Markov; tests/core/test_errmodel.py), so its rows and columns of Phi P Phi^T and Qd stay zero and
+    the others do not depend on it: leaving it out is exact and saves the cube of its share of the work."""
+    n = P.shape[0]
+    keep = np.empty(n, np.int64)
+    m = 0
+    for i in range(n):
+        if i < em.X_SENSORS or P[i, i] > 0.0 or q[i] > 0.0:
+            keep[m] = i
+            m += 1
+    Fa = np.empty((m, m))
+    Pa = np.empty((m, m))
+    qa = np.empty(m)
+    for a in range(m):
+        qa[a] = q[keep[a]]
+        for b in range(m):
+            Fa[a, b] = F[keep[a], keep[b]]
+            Pa[a, b] = P[keep[a], keep[b]]
+    phi, qd = em.discretise_density(Fa, qa, T)
+    kf.predict(Pa, phi, qd)
+    for a in range(m):
+        for b in range(m):
+            P[keep[a], keep[b]] = Pa[a, b]
 
 
 @kernel

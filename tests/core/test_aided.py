@@ -21,6 +21,7 @@ from mavins.core import aided
 from mavins.core import errmodel as em
 from mavins.core import kalman as kf
 from mavins.core import strapdown as sd
+from mavins.core.rotation import euler_to_dcm
 from support import NO_SMOOTHING, A, E2, gamma, mag_by_hand
 
 LAT0, LON0, H0 = 45.0, 7.0, 100.0  # deg, deg, m
@@ -972,3 +973,58 @@ def test_smoothing_a_constant_position_gives_every_row_the_final_estimate() -> N
     assert st["epochs"] == 3 and st["singular"] == 0
     np.testing.assert_array_equal(smo[-1], fwd[-1])
     np.testing.assert_array_equal(smo[:, 4:14], fwd[:, 4:14])  # nothing else moves: velocity, attitude
+
+
+def full_spec() -> np.ndarray:
+    """Every sensor error of the model estimated: Gauss-Markov parts, scale factors, misalignments, the odometer,
+    a barometer drift and a camera frame's walk."""
+    return em.make_spec("consumer", baro_drift=0.01, scale_factors=True, misalignment=True, wheel_scale=0.02,
+                        vision_drift=0.01, vision_yaw_drift=1e-4)
+
+
+def moving_f(spec: np.ndarray) -> np.ndarray:
+    """F of a turning, climbing, accelerating vehicle (errmodel.system_matrix and motion_columns)."""
+    c = euler_to_dcm(0.2, -0.1, 2.0)
+    F = em.system_matrix(c, np.array([12.0, -5.0, 1.0]), 0.8, 300.0, np.array([0.5, -1.0, -9.5]), spec, True)
+    em.motion_columns(F, c, np.array([0.1, -0.2, 0.3]), np.array([0.5, 0.2, -9.8]), spec)
+    return F
+
+
+def test_a_sensor_errors_row_of_f_is_at_most_its_own_diagonal() -> None:
+    """What predict_active leaves out rests on this: every error from the gyro bias on changes by itself alone
+    (random constants, walks, first-order Gauss-Markov), with every error of the model estimated."""
+    F = moving_f(full_spec())
+    off = F[em.X_SENSORS:].copy()
+    for i in range(off.shape[0]):
+        off[i, em.X_SENSORS + i] = 0.0
+    assert not off.any()
+    assert F[:em.X_SENSORS, em.X_SENSORS:].any()  # the navigation errors do depend on them
+
+
+@pytest.mark.parametrize("estimated", ["some", "all"])
+def test_predict_active_is_the_full_propagation(estimated: str) -> None:
+    """P propagated over the states with variance or noise equals Phi P Phi^T + Qd over all NX (the same
+    products less exact zeros: to 1e-15 of the largest element), its rows of the states left out stay exactly
+    zero; ``some``: the camera frame, scale factors and misalignments not estimated (zero rows, no noise);
+    ``all``: nothing left out."""
+    rng = np.random.default_rng(3)
+    if estimated == "some":
+        spec = em.make_spec("consumer", baro_drift=0.01)
+        live = np.r_[0:em.X_SG, em.X_MB:em.X_MB + 3]  # a hard iron estimated: variance, no noise
+    else:
+        spec = full_spec()
+        live = np.arange(em.NX)
+    F = moving_f(spec)
+    a = rng.normal(size=(live.size, live.size))
+    P = np.zeros((em.NX, em.NX))
+    P[np.ix_(live, live)] = a @ a.T * 1e-2
+    want = P.copy()
+    phi, qd = em.discretise(F, spec, 0.01)
+    kf.predict(want, phi, qd)
+    got = P.copy()
+    aided.predict_active(got, F, em.noise_density(spec), 0.01)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-15 * np.abs(want).max())
+    dead = np.setdiff1d(np.arange(em.NX), live)
+    dead = dead[em.noise_density(spec)[dead] == 0.0]
+    assert not got[dead].any() and not got[:, dead].any()
+    assert (estimated == "all") == (dead.size == 0)

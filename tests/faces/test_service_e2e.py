@@ -842,3 +842,49 @@ def test_streamed_wheel_distance_is_fused_by_the_service() -> None:
     assert svc.pipeline.counters["wheel_gap"] == 0 and svc.pipeline.counters["wheel_invalid"] == 0
     k, sig = svc.pipeline.engine.filter.bias[kalman.B_WS], math.sqrt(svc.pipeline.engine.filter.P[em.X_WS, em.X_WS])
     assert abs(k - 0.01) < 3.0 * sig and sig < 0.002, (k, sig)
+
+
+# -- external vision alone over the live path ----------------------------------------------------------------------
+def test_a_camera_alone_starts_and_holds_the_service() -> None:
+    """``mavins sim flight --stream --vision-rate 30 --gnss-rate 0`` (a camera's ODOMETRY from component 197 and
+    GPS_GLOBAL_ORIGIN, no GNSS) into a Service with neither a position nor a heading given and ``--aiding
+    vision`` over UDP: the origin comes from GPS_GLOBAL_ORIGIN, the heading from the vehicle's ATTITUDE (which
+    ``auto`` prefers: it knows north); the frame is placed once, its heading found (the simulator's 30 deg,
+    within 3 sigma), and every later pose is accepted (30 a second of navigation, less the ones before it); at
+    the end the published position is on the truth within 1 m horizontally (the camera's 5 cm and 1 deg over
+    a flight of a few hundred metres)."""
+    from mavins.live.engine import EngineConfig
+    from mavins.core import errmodel as em
+    from mavins.core import kalman
+    from mavins.live.livefilter import FilterSettings
+    from mavins.link.ingest import IngestConfig
+    from mavins.service import Service, ServiceConfig
+
+    svc_port = free_udp_port()
+    client = Client()
+    tee = Tee(svc_port)
+    svc = Service(EngineConfig(align=ALIGN_S, filter=FilterSettings(aiding=("vision",))), IngestConfig(),
+                  ServiceConfig(master=f"udpin:127.0.0.1:{svc_port}", outs=[f"udpout:127.0.0.1:{client.port}"]))
+    _serve_a_stream(svc, svc_port, client, tee,
+                    sim_command(tee.port, "--vision-rate", "30", "--gnss-rate", "0", duration=60.0, speed=10))
+    eng = svc.pipeline.engine
+    c = eng.filter.counters
+    assert eng.heading_used == "vehicle ATTITUDE", eng.heading_used
+    truth = truth_from(tee.upstream)
+    first = truth.by_usec[min(truth.by_usec)]  # at rest at the start: GPS_GLOBAL_ORIGIN's position
+    lat0, lon0, alt0 = eng.origin
+    assert lat0 == pytest.approx(first.lat_int * 1e-7, abs=1e-7) and lon0 == pytest.approx(first.lon_int * 1e-7, abs=1e-7)
+    assert alt0 == pytest.approx(first.alt, abs=1e-3)  # mm in GPS_GLOBAL_ORIGIN
+    psi, sig = eng.filter.bias[kalman.B_VY], math.sqrt(eng.filter.P[em.X_VY, em.X_VY])
+    assert abs(math.degrees(psi) - 30.0) < 3.0 * math.degrees(sig) and math.degrees(sig) < 1.0, (psi, sig)
+    assert c["vision_frame_placed"] == 1 and c["vision_pose_rejected"] == 0, dict(c)
+    assert c["vision_pose_accepted"] >= 30 * (60.0 - ALIGN_S) - 35, dict(c)
+    assert c["gnss_pos_accepted"] == 0 and svc.pipeline.counters["own_odometry_ignored"] == 0
+    last = [m for m in client.msgs if m.get_type() == "GLOBAL_POSITION_INT"][-1]
+    usec = min(truth.by_usec, key=lambda u: abs(u - last.time_boot_ms * 1000))
+    assert abs(usec - last.time_boot_ms * 1000) < 25_000  # SIM_STATE at 50 Hz
+    true = truth.by_usec[usec]
+    r = 6.371e6
+    dn = math.radians(last.lat * 1e-7 - true.lat_int * 1e-7) * r
+    de = math.radians(last.lon * 1e-7 - true.lon_int * 1e-7) * r * math.cos(math.radians(last.lat * 1e-7))
+    assert math.hypot(dn, de) < 1.0, (dn, de)

@@ -19,12 +19,12 @@ from mavins.core.rotation import quat_to_dcm
 from mavins.link.mavlink import mavlink
 from mavins.live.engine import Engine, EngineConfig
 from mavins.live.livefilter import VISION_HEADING, FilterSettings
-from mavins.live.pipeline import VISION_SIGMA_VEL, Pipeline
+from mavins.live.pipeline import VISION_SIGMA_ATT, VISION_SIGMA_POS, VISION_SIGMA_VEL, Pipeline
 from sim import errors
 from sim.aiding import GnssConfig, VisionConfig, camera_pose, simulate_aiding, truth_at, vision
 from sim.generate import generate
 from sim.scenarios import Scenario, load
-from support import Z995, chi2_quantile, consumer_stochastic, feed_engine
+from support import Z995, cbn, chi2_quantile, consumer_stochastic, feed_engine
 
 NAN = math.nan
 OWN = 191  # our component id (Pipeline.own_component, docs/service.md)
@@ -94,6 +94,86 @@ def test_vision_messages_become_velocities_with_their_sigmas(pipeline) -> None: 
     assert len(seen) == 6
     assert (p.counters["vision_frame_unsupported"], p.counters["vision_invalid"],
             p.counters["vision_resets"]) == (2, 3, 3)  # resets 0-1-0-2
+
+
+def pose_odometry(enc, frame: int, pos, q, pcov=None, reset: int = 0, vel=(NAN, NAN, NAN)):  # type: ignore[no-untyped-def]
+    """An ODOMETRY with a pose (position, quaternion w x y z) in ``frame`` and the pose covariance's diagonal
+    ``pcov`` (x y z roll pitch yaw variances; None: unknown, NaN first)."""
+    return enc.odometry_encode(4_000_000, frame, mavlink.MAV_FRAME_BODY_FRD, *pos, list(q), *vel, 0.0, 0.0, 0.0,
+                               upper(pcov), [NAN] + [0.0] * 20, reset, mavlink.MAV_ESTIMATOR_TYPE_VIO, 100)
+
+
+def upper(diag) -> list[float]:  # type: ignore[no-untyped-def]
+    """A 6 x 6 covariance's upper triangle, row-major (21 values), with the diagonal ``diag`` (None: unknown, the
+    first value NaN): the diagonal sits at 0, 6, 11, 15, 18, 20 (row i starts at 6 i - i (i - 1) / 2)."""
+    if diag is None:
+        return [NAN] + [0.0] * 20
+    cov = [0.0] * 21
+    for i, v in enumerate(diag):
+        cov[6 * i - i * (i - 1) // 2] = v
+    return cov
+
+
+@pytest.fixture
+def poses():  # type: ignore[no-untyped-def]
+    """A pipeline whose engine's pose entry point is watched."""
+    p = Pipeline(EngineConfig(filter=FilterSettings(aiding=("vision",))), own_component=OWN)
+    seen: list[tuple] = []
+    p.engine.on_vision_pose = lambda *a: seen.append(a)  # type: ignore[method-assign]
+    return p, seen
+
+
+def test_vision_poses_with_their_frames_and_sigmas(poses) -> None:  # type: ignore[no-untyped-def]
+    """ODOMETRY in LOCAL_FRD or LOCAL_NED: the position, the attitude from q (body to the frame; normalised),
+    sigmas from the pose covariance's diagonal (upper-triangle indices 0, 6, 11, 15, 18, 20), the defaults
+    where its first element is NaN, the reset_counter passed on; VISION_POSITION_ESTIMATE: roll, pitch, yaw
+    (ZYX, support.cbn) with its covariance; a NaN quaternion: the position without an attitude; another frame,
+    a NaN or infinite position, a non-positive variance counted and not used; no pose and no velocity
+    (NaN x and vx) counted as empty."""
+    p, seen = poses
+    half = math.radians(15.0)
+    q30 = (2.0 * math.cos(half), 0.0, 0.0, 2.0 * math.sin(half))  # 30 deg of yaw, not normalised
+    p.handle(encoded(lambda e: pose_odometry(e, mavlink.MAV_FRAME_LOCAL_FRD, (1.0, 2.0, 3.0), q30,
+                                             (0.01, 0.04, 0.09, 1e-4, 4e-4, 9e-4), reset=3)))
+    p.handle(encoded(lambda e: pose_odometry(e, mavlink.MAV_FRAME_LOCAL_NED, (4.0, 5.0, 6.0), (1.0, 0.0, 0.0, 0.0))))
+    p.handle(encoded(lambda e: e.vision_position_estimate_encode(
+        5_000_000, 7.0, 8.0, 9.0, 0.1, -0.2, 0.3, upper((0.25, 0.25, 0.25, 1e-4, 1e-4, 1e-4)), 3)))
+    p.handle(encoded(lambda e: pose_odometry(e, mavlink.MAV_FRAME_LOCAL_FRD, (1.0, 2.0, 3.0), (NAN, 0, 0, 0))))
+    assert len(seen) == 4
+    t, pos, c, sp, sa, reset = seen[0]
+    assert t is None and pos == (1.0, 2.0, 3.0) and reset == 3  # no IMU yet: taken as of the latest sample
+    np.testing.assert_allclose(c, cbn(0.0, 0.0, math.radians(30.0)), rtol=0, atol=1e-7)
+    assert sp == pytest.approx((0.1, 0.2, 0.3)) and sa == pytest.approx((0.01, 0.02, 0.03))
+    assert seen[1][1] == (4.0, 5.0, 6.0) and seen[1][3:] == ((VISION_SIGMA_POS,) * 3, (VISION_SIGMA_ATT,) * 3, 0)
+    np.testing.assert_array_equal(seen[1][2], np.eye(3))
+    assert seen[2][1] == (7.0, 8.0, 9.0) and seen[2][3] == pytest.approx((0.5,) * 3) and seen[2][5] == 3
+    assert seen[2][4] == pytest.approx((0.01,) * 3)
+    np.testing.assert_allclose(seen[2][2], cbn(0.1, -0.2, 0.3), rtol=0, atol=1e-7)
+    assert seen[3][2] is None and seen[3][1] == (1.0, 2.0, 3.0)
+    p.handle(encoded(lambda e: pose_odometry(e, mavlink.MAV_FRAME_LOCAL_FLU, (1.0, 2.0, 3.0), q30)))
+    p.handle(encoded(lambda e: pose_odometry(e, mavlink.MAV_FRAME_LOCAL_FRD, (1.0, math.inf, 3.0), q30)))
+    p.handle(encoded(lambda e: pose_odometry(e, mavlink.MAV_FRAME_LOCAL_FRD, (1.0, 2.0, 3.0), q30,
+                                             (0.01, 0.04, 0.0, 1e-4, 4e-4, 9e-4))))
+    p.handle(encoded(lambda e: pose_odometry(e, mavlink.MAV_FRAME_LOCAL_FRD, (1.0, 2.0, 3.0), q30,
+                                             (0.01, 0.04, 0.09, 1e-4, -4e-4, 9e-4))))
+    p.handle(encoded(lambda e: e.vision_position_estimate_encode(5_000_000, 7.0, NAN, 9.0, 0.1, -0.2, 0.3,
+                                                                  [NAN] + [0.0] * 20, 3)))
+    p.handle(encoded(lambda e: pose_odometry(e, mavlink.MAV_FRAME_LOCAL_FRD, (NAN, 2.0, 3.0), q30)))
+    assert len(seen) == 4
+    assert (p.counters["vision_frame_unsupported"], p.counters["vision_invalid"], p.counters["vision_empty"]) == (1, 4, 1)
+
+
+def test_a_global_origin_is_the_initial_position() -> None:
+    """GPS_GLOBAL_ORIGIN (or SET_GPS_GLOBAL_ORIGIN: degE7, mm above mean sea level) gives the engine its initial
+    position (the geoid height added), as a vehicle that navigates without GNSS reports its local frame's
+    origin; a later one does not move it."""
+    p = Pipeline(EngineConfig(filter=FilterSettings(aiding=("vision",)), geoid_height=47.0), own_component=OWN)
+    p.handle(encoded(lambda e: e.gps_global_origin_encode(473977420, 85455940, 488000, 0), component=1))
+    p.handle(encoded(lambda e: e.set_gps_global_origin_encode(1, 100000000, 200000000, 0, 0), component=1))
+    assert p.engine.origin == pytest.approx((47.397742, 8.545594, 535.0))
+    q = Pipeline(EngineConfig(filter=FilterSettings(aiding=("vision",))), own_component=OWN)
+    q.handle(encoded(lambda e: e.set_gps_global_origin_encode(1, 100000000, 200000000, 1500, 0), component=1))
+    assert q.engine.origin == pytest.approx((10.0, 20.0, 1.5))
 
 
 def test_vision_is_stamped_on_the_imu_clock() -> None:
@@ -221,3 +301,36 @@ def test_a_cameras_pose_alone_is_fused_consistently(quiet_flight) -> None:  # ty
     per_epoch = z2.mean(axis=0)
     assert lo < per_epoch.mean() < hi, (per_epoch.mean(), lo, hi)
     assert np.mean((per_epoch < lo) | (per_epoch > hi)) < 0.05, (np.round(per_epoch, 2), lo, hi)
+
+
+def test_the_live_filter_places_a_frame_once_per_reset_counter() -> None:
+    """The first pose of a reset_counter places the frame (its states then have variance, its origin is the
+    pose's position less the solution's; the smoother's log starts again), the next ones are fused (accepted),
+    a new reset_counter places it again, and a pose without an attitude cannot place one (counted)."""
+    from mavins.core import errmodel as em
+    from mavins.core import strapdown as sd
+    from mavins.core.runner import rest_state
+    from mavins.live.livefilter import LiveFilter
+
+    cfg = sd.make_config()
+    s = rest_state()
+    f = LiveFilter(FilterSettings(aiding=("vision",), smooth=True))
+    f.start(s, cfg, np.zeros(3), 0.01)
+    t = sd.state_time(s)
+    sig = ((0.1,) * 3, (0.02,) * 3)
+    f.measure(s, cfg, t, "vision_pose", (1.0, 2.0, 3.0), None, *sig, 0)
+    assert f.counters["vision_pose_unplaced"] == 1 and f.vision_frame is None and f.P[em.X_VY, em.X_VY] == 0.0
+    generation = f.epochs.generation  # type: ignore[union-attr]
+    f.measure(s, cfg, t, "vision_pose", (1.0, 2.0, 3.0), np.eye(3), *sig, 0)
+    assert f.counters["vision_frame_placed"] == 1 and f.vision_frame == 0
+    assert f.epochs.generation == generation + 1  # type: ignore[union-attr]
+    np.testing.assert_allclose(f.bias[kf.B_VP:kf.B_VP + 3], -np.array([1.0, 2.0, 3.0]), atol=1e-6)  # rest, yaw 0
+    assert f.P[em.X_VY, em.X_VY] > 0.0 and np.all(np.diag(f.P)[em.X_VP:em.X_VP + 3] > 0.0)
+    for _ in range(3):
+        f.measure(s, cfg, t, "vision_pose", (1.0, 2.0, 3.0), np.eye(3), *sig, 0)
+    assert f.counters["vision_pose_accepted"] == 3 and f.counters["vision_frame_placed"] == 1
+    f.measure(s, cfg, t, "vision_pose", (5.0, 2.0, 3.0), np.eye(3), *sig, 1)
+    assert f.counters["vision_frame_placed"] == 2 and f.vision_frame == 1
+    assert f.bias[kf.B_VP] == pytest.approx(-5.0, abs=1e-3)
+    f.start(s, cfg, np.zeros(3), 0.01)  # a new start forgets the frame
+    assert f.vision_frame is None and f.vision_ref is None
