@@ -94,8 +94,10 @@ class LiveFilter:
         st = self.settings
         self.spec = errmodel.make_spec(st.spec, scale_factors=st.scale_factors, misalignment=st.misalignment,
                                        wheel_scale=st.wheel_scale if "wheel" in st.aiding else 0.0,
-                                       vision_drift=st.vision_drift,
-                                       vision_yaw_drift=math.radians(st.vision_yaw_drift) / 60.0)
+                                       # the camera frame's walks only with a camera: else its states stay out
+                                       vision_drift=st.vision_drift if "vision" in st.aiding else 0.0,
+                                       vision_yaw_drift=math.radians(st.vision_yaw_drift) / 60.0
+                                       if "vision" in st.aiding else 0.0)
         self.lever = np.asarray(st.lever_arm, dtype=float).reshape(3)
         self.wheel_lever = np.asarray(st.wheel_lever_arm, dtype=float).reshape(3)
         self.P = np.zeros((errmodel.NX, errmodel.NX))

@@ -142,6 +142,51 @@ def test_placing_the_frame_zeroes_its_innovations() -> None:
     assert np.all(np.linalg.eigvalsh(P) > -1e-12)
 
 
+def test_the_placed_frames_covariance_by_hand() -> None:
+    """Level, heading 70 deg, the camera's pose 0.01 s old: the frame's heading error is ``phi_D + n_z`` and its
+    origin's ``dp - dt dv - (z x Rz p_v) e + Rz n_p`` (docs/filter.md, with d = Rz p_v after placing), so with
+    P holding phi_D, dv and dp variances (and one dp-dv correlation) the placed rows are those sums' variances
+    and covariances, written out here with numpy."""
+    s = sd.init_state(0.0, REF[0], REF[1], REF[2], np.array([3.0, -1.0, 0.2]), 0.0, 0.0, math.radians(70.0))
+    bias = np.zeros(kf.B_SIZE)
+    P = np.zeros((em.NX, em.NX))
+    P[em.X_PHI + 2, em.X_PHI + 2] = 0.01
+    for i, (vp, vv) in enumerate(((4.0, 0.04), (9.0, 0.09), (1.0, 0.01))):
+        P[em.X_DP + i, em.X_DP + i] = vp
+        P[em.X_DV + i, em.X_DV + i] = vv
+    P[em.X_DP, em.X_DV] = P[em.X_DV, em.X_DP] = 0.3 * math.sqrt(4.0 * 0.04)
+    P0 = P.copy()
+    p_v, dt = np.array([2.0, -3.0, 0.5]), 0.01
+    sig_p, sig_a = np.array([0.1, 0.2, 0.3]), np.array([0.01, 0.02, 0.03])
+    psi = 0.4
+    c_vb = rz(psi).T @ cbn(0.0, 0.0, math.radians(70.0))
+    place(s, bias, P, p_v, c_vb, sig_p, sig_a, dt)
+    assert bias[kf.B_VY] == pytest.approx(psi, abs=1e-12)
+    rp = rz(psi) @ p_v
+    k = np.array([-rp[1], rp[0], 0.0])  # z x (Rz p_v)
+    # the errors as linear maps of (phi_D, dv, dp, n_p, n_z)
+    n = em.NX + 4
+    E_psi = np.zeros(n)
+    E_psi[em.X_PHI + 2] = 1.0
+    E_psi[em.NX + 3] = 1.0
+    E_o = np.zeros((3, n))
+    for i in range(3):
+        E_o[i, em.X_DP + i] = 1.0
+        E_o[i, em.X_DV + i] = -dt
+        E_o[i] -= k[i] * E_psi
+    E_o[:, em.NX:em.NX + 3] = rz(psi)
+    Q = np.zeros((n, n))
+    Q[:em.NX, :em.NX] = P0
+    Q[em.NX:em.NX + 3, em.NX:em.NX + 3] = np.diag(sig_p ** 2)
+    Q[em.NX + 3, em.NX + 3] = sig_a[2] ** 2  # level: the body's z axis is down
+    E = np.vstack((E_o, E_psi))
+    np.testing.assert_allclose(P[em.X_VP:em.X_VY + 1, em.X_VP:em.X_VY + 1], E @ Q @ E.T, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(P[em.X_VP:em.X_VY + 1, :em.X_VP], (E @ Q)[:, :em.X_VP], rtol=1e-12, atol=1e-15)
+    np.testing.assert_array_equal(P[:em.X_VP, :em.X_VP], P0[:em.X_VP, :em.X_VP])
+    np.testing.assert_array_equal(P, P.T)
+
+
+@pytest.mark.plain_python_slow  # 3,000 placements: minutes as plain Python (mutation runs use the test above)
 def test_the_placed_frames_covariance_matches_a_monte_carlo() -> None:
     """The frame placed from a pose of a true vehicle drawn from P (errors on attitude, velocity and position;
     0.2 m, as good as the camera's 0.1 m, so that the camera's noise is a fifth of the origin's variance; 1.5 m

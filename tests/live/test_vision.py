@@ -334,3 +334,15 @@ def test_the_live_filter_places_a_frame_once_per_reset_counter() -> None:
     assert f.bias[kf.B_VP] == pytest.approx(-5.0, abs=1e-3)
     f.start(s, cfg, np.zeros(3), 0.01)  # a new start forgets the frame
     assert f.vision_frame is None and f.vision_ref is None
+
+
+def test_the_camera_frames_walk_is_in_the_model_only_with_vision_aiding() -> None:
+    """--vision-drift and --vision-yaw-drift (m/sqrt(s), deg/sqrt(h)) enter the process model with vision
+    aiding; without it the frame's states have no noise and stay out of the propagation."""
+    from mavins.core import errmodel as em
+    from mavins.live.livefilter import LiveFilter
+
+    on = LiveFilter(FilterSettings(aiding=("vision",), vision_drift=0.02, vision_yaw_drift=3.0)).spec
+    assert on[em.SP_VISION_DRIFT] == 0.02 and on[em.SP_VISION_YAW_DRIFT] == pytest.approx(math.radians(3.0) / 60.0)
+    off = LiveFilter(FilterSettings(aiding=("gnss",), vision_drift=0.02, vision_yaw_drift=3.0)).spec
+    assert off[em.SP_VISION_DRIFT] == off[em.SP_VISION_YAW_DRIFT] == 0.0
