@@ -860,8 +860,8 @@ def vision_place(s: np.ndarray, cfg: np.ndarray, bias: np.ndarray, P: np.ndarray
             if j < X_VP or j > X_VY:
                 P[ya, j] = jp[a, j]
                 P[j, ya] = jp[a, j]
-        for k in range(4):
-            P[ya, X_VP + k] = pyy[a, k] + N[a, k]
+        for k in range(4):  # symmetric to the last bit: the mean of the two triangles
+            P[ya, X_VP + k] = 0.5 * (pyy[a, k] + pyy[k, a] + N[a, k] + N[k, a])
 
 
 @kernel

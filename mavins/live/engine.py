@@ -501,22 +501,17 @@ class Engine:
 
     def on_baro(self, t: float | None, h: float, sigma: float) -> None:
         """A barometric height (m, with an unknown offset the filter estimates)."""
-        if self.state is State.NAVIGATING and self._s is not None:
-            self.filter.measure(self._s, self._kcfg, sd.state_time(self._s) if t is None else t, "baro", h, sigma)
+        self._measure(t, "baro", h, sigma)
 
     def on_wheel(self, t: float | None, speed: float, sigma: float) -> None:
         """A wheel odometer's forward speed (m/s, body x at the axle centre; 1-sigma m/s), measured at t."""
-        if self.state is State.NAVIGATING and self._s is not None:
-            self.filter.measure(self._s, self._kcfg, sd.state_time(self._s) if t is None else t, "wheel", speed,
-                                sigma)
+        self._measure(t, "wheel", speed, sigma)
 
     def on_vision_velocity(self, t: float | None, vel: tuple[float, float, float], sigma: float | tuple,
                            body: bool) -> None:
         """A velocity from a camera or motion capture (m/s): NED with one 1-sigma (m/s), or with ``body`` in
         the body frame FRD with a 1-sigma per axis; measured at t."""
-        if self.state is State.NAVIGATING and self._s is not None:
-            self.filter.measure(self._s, self._kcfg, sd.state_time(self._s) if t is None else t,
-                                "vision_body" if body else "vision_vel", vel, sigma)
+        self._measure(t, "vision_body" if body else "vision_vel", vel, sigma)
 
     def on_vision_pose(self, t: float | None, p_v: tuple[float, float, float], c_vb: np.ndarray | None,
                        sigma_p: tuple[float, float, float], sigma_att: tuple[float, float, float], reset: int) -> None:
@@ -526,9 +521,12 @@ class Engine:
         a magnetometer); while navigating a pose measurement (LiveFilter: the first places the frame)."""
         if c_vb is not None:
             self._vision_yaw = math.atan2(c_vb[1, 0], c_vb[0, 0])
+        self._measure(t, "vision_pose", p_v, c_vb, sigma_p, sigma_att, reset)
+
+    def _measure(self, t: float | None, kind: str, *args: object) -> None:
+        """A measurement of ``kind`` at t on the IMU clock (None: now) to the filter, while navigating."""
         if self.state is State.NAVIGATING and self._s is not None:
-            self.filter.measure(self._s, self._kcfg, sd.state_time(self._s) if t is None else t,
-                                "vision_pose", p_v, c_vb, sigma_p, sigma_att, reset)
+            self.filter.measure(self._s, self._kcfg, sd.state_time(self._s) if t is None else t, kind, *args)
 
     def _output_due(self, t: float) -> bool:
         """One output set each time sensor time crosses a multiple of 1/rate (docs/conventions.md

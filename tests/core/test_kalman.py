@@ -1115,3 +1115,14 @@ def test_wheel_speed_on_a_turned_state_by_hand() -> None:
     np.testing.assert_allclose(H[0, em.X_BG:em.X_BG + 3], 1.03 * lx[0], rtol=0, atol=1e-15)  # (l x db)_x
     np.testing.assert_array_equal(H[0, em.X_BG:em.X_BG + 3], H[0, em.X_GG:em.X_GG + 3])
     assert H[0, em.X_WS] == pytest.approx(u, abs=1e-13)
+
+
+@pytest.mark.parametrize("name", ["wheel_scale", "vision_drift", "vision_yaw_drift"])
+@pytest.mark.parametrize("value", [-1e-3, math.inf, math.nan])
+def test_make_spec_refuses_a_negative_or_non_finite_figure_by_name(name: str, value: float) -> None:
+    with pytest.raises(ValueError, match=rf"^{name} must be finite and >= 0, got {value!r}$"):
+        em.make_spec("consumer", **{name: value})
+    sp = em.make_spec("consumer", **{name: 0.25})
+    slot = {"wheel_scale": em.SP_WHEEL_SCALE, "vision_drift": em.SP_VISION_DRIFT,
+            "vision_yaw_drift": em.SP_VISION_YAW_DRIFT}[name]
+    assert sp[slot] == 0.25 and np.count_nonzero(sp[em.SP_WHEEL_SCALE:]) == 1

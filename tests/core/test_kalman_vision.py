@@ -186,6 +186,25 @@ def test_the_placed_frames_covariance_by_hand() -> None:
     np.testing.assert_array_equal(P, P.T)
 
 
+def test_placing_again_forgets_the_old_frame() -> None:
+    """A new reset_counter places the frame again: the rows it writes are those of a first placement, whatever
+    the old frame's origin, heading and correlations were."""
+    s, bias, c, _ = turned(2e-6)
+    rng = np.random.default_rng(2)
+    a = rng.normal(size=(em.NX, em.NX)) * 0.1
+    P = a @ a.T  # every state correlated with every other, the old frame included
+    fresh = P.copy()
+    fresh[em.X_VP:, :] = 0.0
+    fresh[:, em.X_VP:] = 0.0
+    p_v, c_vb = (1.0, -2.0, 0.5), rz(0.3).T @ c
+    s2, b2 = s.copy(), bias.copy()
+    place(s, bias, P, p_v, c_vb, (0.1,) * 3, (0.02,) * 3)
+    place(s2, b2, fresh, p_v, c_vb, (0.1,) * 3, (0.02,) * 3)
+    np.testing.assert_array_equal(bias, b2)
+    np.testing.assert_allclose(P[em.X_VP:, :], fresh[em.X_VP:, :], rtol=1e-13, atol=1e-16)
+    np.testing.assert_array_equal(P, P.T)
+
+
 @pytest.mark.plain_python_slow  # 3,000 placements: minutes as plain Python (mutation runs use the test above)
 def test_the_placed_frames_covariance_matches_a_monte_carlo() -> None:
     """The frame placed from a pose of a true vehicle drawn from P (errors on attitude, velocity and position;

@@ -991,3 +991,63 @@ def test_a_dual_antenna_heading_while_navigating_is_a_heading_update():
     align(e)
     e.on_gnss_yaw(None, math.radians(31.0), math.radians(1.0))
     assert not e.filter.counters
+
+
+# --- a camera's pose (ODOMETRY, VISION_POSITION_ESTIMATE) -----------------------------------------------------
+def camera(yaw_deg: float, frame_deg: float = 0.0) -> np.ndarray:
+    """A camera's attitude (body to its frame) for the vehicle at ATT's roll and pitch heading ``yaw_deg``, seen
+    from a frame turned ``frame_deg`` from north."""
+    f = math.radians(frame_deg)
+    rz = np.array([[math.cos(f), -math.sin(f), 0.0], [math.sin(f), math.cos(f), 0.0], [0.0, 0.0, 1.0]])
+    return rz.T @ c_bn(ATT[0], ATT[1], math.radians(yaw_deg))
+
+
+@pytest.mark.parametrize("heading, aiding, mag, source", [
+    ("vision", ("vision",), True, "vision"),  # asked for: over the magnetometer
+    ("auto", ("vision",), False, "vision"),  # the only position aiding, nothing else knows north
+    ("auto", ("vision", "baro"), False, "vision"),
+    ("auto", ("vision",), True, "magnetometer"),  # a magnetometer knows north
+    ("auto", ("vision", "gnss"), False, "gyrocompass"),  # with GNSS the yaw estimator's way instead (navigation gyros here)
+])
+def test_the_heading_from_a_cameras_attitude(heading, aiding, mag, source):
+    """--heading vision, or auto when the camera is the only position aiding and no magnetometer, takes the
+    camera's yaw in its frame (here the vehicle heads 30 deg, its camera frame turned -20 deg: 50 deg) with the
+    filter's typed-heading 1-sigma; otherwise the others' order holds. The latest pose's attitude counts."""
+    e = Engine(cfg(heading=heading, declination=math.degrees(math.atan2(M_N[1], M_N[0])),
+                   filter=FilterSettings(aiding=aiding, spec="navigation")))
+    e.on_vision_pose(None, (0.0, 0.0, 0.0), camera(10.0), (0.1,) * 3, (0.01,) * 3, 0)
+    e.on_vision_pose(None, (0.0, 0.0, 0.0), camera(30.0, -20.0), (0.1,) * 3, (0.01,) * 3, 0)
+    align(e, mag=mag, att=(ATT[0], ATT[1], math.radians(30.0)))
+    assert e.heading_used == source
+    if source == "vision":
+        row = e._row.copy()
+        e._solution_row(e._s, e._kcfg, row)
+        assert math.degrees(row[9]) == pytest.approx(50.0, abs=1e-9)
+        assert math.sqrt(e.filter.P[2, 2]) == pytest.approx(math.radians(e.filter.settings.sigma_yaw), rel=1e-12)
+
+
+def test_the_heading_from_a_camera_never_seen_falls_back_to_gyrocompass():
+    e = Engine(cfg(heading="vision", filter=FilterSettings(aiding=("vision",))))
+    e.on_vision_pose(None, (0.0, 0.0, 0.0), None, (0.1,) * 3, (0.01,) * 3, 0)  # a pose without an attitude
+    align(e, mag=False)
+    assert e.heading_used == "gyrocompass"
+    assert "WARNING no camera attitude seen: heading from gyrocompass" in texts(e)
+
+
+def test_a_cameras_pose_while_navigating_places_its_frame_then_is_fused():
+    """Before navigation a pose only gives a heading; navigating, the first places the camera's frame (turned
+    -20 deg, found to the pose's 0.01 rad) and the next ones are fused at their time; without vision aiding
+    nothing."""
+    e = Engine(cfg(heading=30.0, filter=FilterSettings(aiding=("vision",))))
+    e.on_vision_pose(None, (1.0, 2.0, 3.0), camera(30.0, -20.0), (0.1,) * 3, (0.01,) * 3, 0)
+    assert not e.filter.counters
+    t = align(e, att=(ATT[0], ATT[1], math.radians(30.0)))
+    e.on_vision_pose(None, (1.0, 2.0, 3.0), camera(30.0, -20.0), (0.1,) * 3, (0.01,) * 3, 0)
+    assert e.filter.counters["vision_frame_placed"] == 1 and e.filter.vision_frame == 0
+    assert math.degrees(e.filter.bias[-1]) == pytest.approx(-20.0, abs=1e-6)
+    e.on_vision_pose(t - DT, (1.0, 2.0, 3.0), camera(30.0, -20.0), (0.1,) * 3, (0.01,) * 3, 0)
+    assert e.filter.counters["vision_pose_accepted"] == 1
+    e = Engine(cfg(heading=30.0, filter=FilterSettings(aiding=("gnss",))))
+    align(e, att=(ATT[0], ATT[1], math.radians(30.0)))
+    e.on_vision_pose(None, (1.0, 2.0, 3.0), camera(30.0, -20.0), (0.1,) * 3, (0.01,) * 3, 0)
+    assert not e.filter.counters

@@ -159,8 +159,31 @@ def test_vision_poses_with_their_frames_and_sigmas(poses) -> None:  # type: igno
     p.handle(encoded(lambda e: e.vision_position_estimate_encode(5_000_000, 7.0, NAN, 9.0, 0.1, -0.2, 0.3,
                                                                   [NAN] + [0.0] * 20, 3)))
     p.handle(encoded(lambda e: pose_odometry(e, mavlink.MAV_FRAME_LOCAL_FRD, (NAN, 2.0, 3.0), q30)))
+    p.handle(encoded(lambda e: pose_odometry(e, mavlink.MAV_FRAME_LOCAL_FLU, (1.0, 2.0, 3.0), q30)))  # counted again
+    p.handle(encoded(lambda e: pose_odometry(e, mavlink.MAV_FRAME_LOCAL_FRD, (1.0, 2.0, 3.0), q30,
+                                             (0.01, 0.04, 0.09, 0.0, 4e-4, 9e-4))))  # a zero roll variance
+    p.handle(encoded(lambda e: pose_odometry(e, mavlink.MAV_FRAME_LOCAL_FRD, (1.0, 2.0, 3.0), q30,
+                                             (0.01, 0.04, 0.09, -1e-4, 4e-4, 9e-4))))  # a negative one
     assert len(seen) == 4
-    assert (p.counters["vision_frame_unsupported"], p.counters["vision_invalid"], p.counters["vision_empty"]) == (1, 4, 1)
+    assert (p.counters["vision_frame_unsupported"], p.counters["vision_invalid"], p.counters["vision_empty"]) == (2, 6, 1)
+    # no attitude (a NaN quaternion, a NaN yaw): the position with its sigmas, the attitude's not read
+    p.handle(encoded(lambda e: pose_odometry(e, mavlink.MAV_FRAME_LOCAL_FRD, (1.0, 2.0, 3.0), (NAN, 0, 0, 0),
+                                             (0.01, 0.04, 0.09, 0.0, 0.0, 0.0))))
+    p.handle(encoded(lambda e: e.vision_position_estimate_encode(5_000_000, 7.0, 8.0, 9.0, 0.1, -0.2, NAN,
+                                                                  upper((0.25, 0.25, 0.25, 1e-4, 1e-4, 1e-4)), 3)))
+    assert len(seen) == 6 and p.counters["vision_invalid"] == 6
+    assert seen[4][2] is None and seen[4][3] == pytest.approx((0.1, 0.2, 0.3)) and seen[4][4] == (VISION_SIGMA_ATT,) * 3
+    assert seen[5][2] is None and seen[5][1] == (7.0, 8.0, 9.0) and seen[5][4] == (VISION_SIGMA_ATT,) * 3
+
+
+def test_vision_poses_are_stamped_on_the_imu_clock(poses) -> None:  # type: ignore[no-untyped-def]
+    """A pose stamped within 2 s of the IMU's time keeps its own time (s, from microseconds)."""
+    p, seen = poses
+    p.last_sample = ImuSample(4.5, (0.0, 0.0, 0.0), (0.0, 0.0, -9.8), None, 1, 1)
+    p.handle(encoded(lambda e: pose_odometry(e, mavlink.MAV_FRAME_LOCAL_FRD, (1.0, 2.0, 3.0), (1.0, 0.0, 0.0, 0.0))))
+    p.handle(encoded(lambda e: e.vision_position_estimate_encode(5_000_000, 7.0, 8.0, 9.0, 0.1, -0.2, 0.3,
+                                                                  upper(None), 0)))
+    assert [x[0] for x in seen] == [pytest.approx(4.0, abs=1e-12), pytest.approx(5.0, abs=1e-12)]
 
 
 def test_a_global_origin_is_the_initial_position() -> None:
@@ -319,7 +342,8 @@ def test_the_live_filter_places_a_frame_once_per_reset_counter() -> None:
     t = sd.state_time(s)
     sig = ((0.1,) * 3, (0.02,) * 3)
     f.measure(s, cfg, t, "vision_pose", (1.0, 2.0, 3.0), None, *sig, 0)
-    assert f.counters["vision_pose_unplaced"] == 1 and f.vision_frame is None and f.P[em.X_VY, em.X_VY] == 0.0
+    f.measure(s, cfg, t, "vision_pose", (1.0, 2.0, 3.0), None, *sig, 0)
+    assert f.counters["vision_pose_unplaced"] == 2 and f.vision_frame is None and f.P[em.X_VY, em.X_VY] == 0.0
     generation = f.epochs.generation  # type: ignore[union-attr]
     f.measure(s, cfg, t, "vision_pose", (1.0, 2.0, 3.0), np.eye(3), *sig, 0)
     assert f.counters["vision_frame_placed"] == 1 and f.vision_frame == 0
@@ -329,6 +353,19 @@ def test_the_live_filter_places_a_frame_once_per_reset_counter() -> None:
     for _ in range(3):
         f.measure(s, cfg, t, "vision_pose", (1.0, 2.0, 3.0), np.eye(3), *sig, 0)
     assert f.counters["vision_pose_accepted"] == 3 and f.counters["vision_frame_placed"] == 1
+    assert set(f.ratios) == {"pos", "hgt"}  # published as ESTIMATOR_STATUS's position test ratios
+    # a placed frame takes a pose without an attitude (its position alone) and one turned 0.01 rad in yaw
+    # (both the solution's heading and the frame's take a share of it: their sum moves by less than 0.01)
+    f.measure(s, cfg, t, "vision_pose", (1.0, 2.0, 3.0), None, *sig, 0)
+    assert f.counters["vision_pose_accepted"] == 4
+    def yaw() -> float:
+        return math.atan2(s[sd.S_C + 3], s[sd.S_C])  # C_b^n row-major: atan2(C21, C11)
+
+    yaw0, psi0 = yaw(), f.bias[kf.B_VY]
+    turn = np.array([[math.cos(0.01), -math.sin(0.01), 0.0], [math.sin(0.01), math.cos(0.01), 0.0], [0.0, 0.0, 1.0]])
+    f.measure(s, cfg, t, "vision_pose", (1.0, 2.0, 3.0), turn, *sig, 0)
+    moved = (yaw() - yaw0) - (f.bias[kf.B_VY] - psi0)
+    assert f.counters["vision_pose_accepted"] == 5 and 0.001 < moved < 0.01
     f.measure(s, cfg, t, "vision_pose", (5.0, 2.0, 3.0), np.eye(3), *sig, 1)
     assert f.counters["vision_frame_placed"] == 2 and f.vision_frame == 1
     assert f.bias[kf.B_VP] == pytest.approx(-5.0, abs=1e-3)
@@ -346,3 +383,19 @@ def test_the_camera_frames_walk_is_in_the_model_only_with_vision_aiding() -> Non
     assert on[em.SP_VISION_DRIFT] == 0.02 and on[em.SP_VISION_YAW_DRIFT] == pytest.approx(math.radians(3.0) / 60.0)
     off = LiveFilter(FilterSettings(aiding=("gnss",), vision_drift=0.02, vision_yaw_drift=3.0)).spec
     assert off[em.SP_VISION_DRIFT] == off[em.SP_VISION_YAW_DRIFT] == 0.0
+
+
+def test_the_settings_pick_the_errors_the_live_filter_estimates() -> None:
+    """--scale-factors, --misalignment and wheel aiding put their initial 1-sigmas into the process model (0
+    without them); the wheel's lever arm is kept as floats."""
+    from mavins.core import errmodel as em
+    from mavins.live.livefilter import LiveFilter
+
+    f = LiveFilter(FilterSettings(spec="consumer", aiding=("gnss", "wheel"), scale_factors=True, misalignment=True,
+                                  wheel_scale=0.03, wheel_lever_arm=(1, -2, 3)))
+    assert f.spec[em.SP_GYRO_SCALE] > 0.0 and f.spec[em.SP_ACC_SCALE] > 0.0
+    assert f.spec[em.SP_GYRO_MIS] > 0.0 and f.spec[em.SP_ACC_MIS] > 0.0 and f.spec[em.SP_WHEEL_SCALE] == 0.03
+    assert f.wheel_lever.dtype == np.float64 and f.wheel_lever.tolist() == [1.0, -2.0, 3.0]
+    g = LiveFilter(FilterSettings(spec="consumer", aiding=("gnss",), wheel_scale=0.03))
+    assert g.spec[em.SP_GYRO_SCALE] == g.spec[em.SP_ACC_SCALE] == g.spec[em.SP_GYRO_MIS] == 0.0
+    assert g.spec[em.SP_ACC_MIS] == g.spec[em.SP_WHEEL_SCALE] == 0.0
