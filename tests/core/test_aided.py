@@ -1001,16 +1001,19 @@ def test_a_sensor_errors_row_of_f_is_at_most_its_own_diagonal() -> None:
     assert F[:em.X_SENSORS, em.X_SENSORS:].any()  # the navigation errors do depend on them
 
 
-@pytest.mark.parametrize("estimated", ["some", "all"])
+@pytest.mark.parametrize("estimated", ["some", "all", "walking"])
 def test_predict_active_is_the_full_propagation(estimated: str) -> None:
     """P propagated over the states with variance or noise equals Phi P Phi^T + Qd over all NX (the same
     products less exact zeros: to 1e-15 of the largest element), its rows of the states left out stay exactly
     zero; ``some``: the camera frame, scale factors and misalignments not estimated (zero rows, no noise);
-    ``all``: nothing left out."""
+    ``all``: nothing left out; ``walking``: the camera frame's states with a walk but no variance yet."""
     rng = np.random.default_rng(3)
     if estimated == "some":
         spec = em.make_spec("consumer", baro_drift=0.01)
         live = np.r_[0:em.X_SG, em.X_MB:em.X_MB + 3]  # a hard iron estimated: variance, no noise
+    elif estimated == "walking":  # a camera frame not placed yet walks: no variance, driving noise
+        spec = em.make_spec("consumer", vision_drift=0.01, vision_yaw_drift=1e-4)
+        live = np.r_[0:em.X_SG]
     else:
         spec = full_spec()
         live = np.arange(em.NX)
@@ -1028,3 +1031,6 @@ def test_predict_active_is_the_full_propagation(estimated: str) -> None:
     dead = dead[em.noise_density(spec)[dead] == 0.0]
     assert not got[dead].any() and not got[:, dead].any()
     assert (estimated == "all") == (dead.size == 0)
+    if estimated == "walking":  # it grew by its walk over the step (Qd's diagonal: q T to first order)
+        assert got[em.X_VP, em.X_VP] == pytest.approx(1e-4 * 0.01, rel=1e-12)
+        assert got[em.X_VY, em.X_VY] == pytest.approx(1e-8 * 0.01, rel=1e-12)

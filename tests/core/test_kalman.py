@@ -1126,3 +1126,14 @@ def test_make_spec_refuses_a_negative_or_non_finite_figure_by_name(name: str, va
     slot = {"wheel_scale": em.SP_WHEEL_SCALE, "vision_drift": em.SP_VISION_DRIFT,
             "vision_yaw_drift": em.SP_VISION_YAW_DRIFT}[name]
     assert sp[slot] == 0.25 and np.count_nonzero(sp[em.SP_WHEEL_SCALE:]) == 1
+
+
+def test_the_camera_frames_walks_drive_its_states_alone() -> None:
+    """noise_density: the camera frame's origin takes its walk squared on each axis (m^2/s), its heading its own
+    (rad^2/s); nothing else changes."""
+    base = em.noise_density(em.make_spec("consumer"))
+    q = em.noise_density(em.make_spec("consumer", vision_drift=0.3, vision_yaw_drift=0.02))
+    want = base.copy()
+    want[em.X_VP:em.X_VP + 3] = 0.09
+    want[em.X_VY] = 0.0004
+    np.testing.assert_allclose(q, want, rtol=1e-15, atol=0)
