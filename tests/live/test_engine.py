@@ -1047,7 +1047,25 @@ def test_a_cameras_pose_while_navigating_places_its_frame_then_is_fused():
     assert math.degrees(e.filter.bias[-1]) == pytest.approx(-20.0, abs=1e-6)
     e.on_vision_pose(t - DT, (1.0, 2.0, 3.0), camera(30.0, -20.0), (0.1,) * 3, (0.01,) * 3, 0)
     assert e.filter.counters["vision_pose_accepted"] == 1
+    e.on_vision_pose(t + 0.5, (1.0, 2.0, 3.0), camera(30.0, -20.0), (0.1,) * 3, (0.01,) * 3, 0)  # ahead: waits
+    assert e.filter.counters["vision_pose_accepted"] == 1
     e = Engine(cfg(heading=30.0, filter=FilterSettings(aiding=("gnss",))))
     align(e, att=(ATT[0], ATT[1], math.radians(30.0)))
     e.on_vision_pose(None, (1.0, 2.0, 3.0), camera(30.0, -20.0), (0.1,) * 3, (0.01,) * 3, 0)
     assert not e.filter.counters
+
+
+@pytest.mark.parametrize("bias_deg_h, aiding, heading, source", [
+    (1.03, ("gnss",), "auto", "GNSS velocity (pending)"),  # 5.8 deg of gyrocompass at 47.4 deg north: too coarse
+    (0.80, ("gnss",), "auto", "gyrocompass"),  # 4.6 deg: good enough
+    (1.03, ("baro",), "auto", "gyrocompass"),  # no GNSS to find the heading from
+    (1.03, ("gnss",), "gyrocompass", "gyrocompass"),  # asked for
+])
+def test_coarse_gyros_leave_the_heading_to_gnss_velocity(bias_deg_h, aiding, heading, source):
+    """auto without a vehicle heading, a GNSS yaw or a magnetometer: gyrocompassing when its 1-sigma (the gyro
+    bias over the horizontal Earth rate at the start's latitude) is at most 5 deg, else, with GNSS aiding, the
+    heading from GNSS velocity once moving (the yaw estimator); the bias is set around 5 deg: 0.93 deg/h."""
+    spec = {"gyro_arw": 0.01, "gyro_bias": bias_deg_h, "accel_vrw": 0.02, "accel_bias": 0.1}
+    e = Engine(cfg(heading=heading, filter=FilterSettings(aiding=aiding, spec=spec)))
+    align(e, mag=False)
+    assert e.heading_used == source
