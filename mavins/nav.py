@@ -50,7 +50,7 @@ def run_nav(imu_path: Path, init_path: Path, out_path: Path, opts: NavOptions) -
     from concurrent.futures import Future, ThreadPoolExecutor
 
     from .core import strapdown as sd
-    from .core.runner import initial_state, to_file_units
+    from .core.runner import initial_state
 
     t_start = time.perf_counter()
     files.check_outputs({"-o": out_path}, {"IMU": imu_path, "--init": init_path})
@@ -90,12 +90,13 @@ def run_nav(imu_path: Path, init_path: Path, out_path: Path, opts: NavOptions) -
                         out = buffers[pieces % 2]  # not the one the writer may still hold
                         pieces += 1
                         m = run(state, cfg, piece[:, 0], piece[:, 1:4], piece[:, 4:7], out)  # views: no copies
-                        sol = to_file_units(out[:m], copy=False)
                         t2 = time.perf_counter()
                         t_compute += t2 - t1
                         if writing is not None:
                             writing.result()  # one piece in the writer at a time: memory stays flat
-                        writing = pool.submit(writer.write, sol)
+                        # the writer thread turns the rows into file units (degrees) and formats them while
+                        # the kernel fills the other buffer
+                        writing = pool.submit(_write_rows, writer, out[:m])
                         rows += m
                         t1 = time.perf_counter()
                         t_write += t1 - t2
@@ -121,6 +122,14 @@ def run_nav(imu_path: Path, init_path: Path, out_path: Path, opts: NavOptions) -
             file=sys.stderr,
         )
     return rows
+
+
+def _write_rows(writer: "files.TableWriter", rows: np.ndarray) -> None:
+    """Solution rows (kernel units) converted in place to file units (degrees: runner.to_file_units) and
+    written (the writer thread of run_nav)."""
+    from .core.runner import to_file_units
+
+    writer.write(to_file_units(rows, copy=False))
 
 
 GNSS_REQUIRED = ("t", "lat", "lon", "h")
