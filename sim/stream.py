@@ -165,11 +165,14 @@ def _piece_frames(run: SimRun, mav: mavlink.MAVLink, opts: StreamOptions, rng: n
         d = (0.0 if d0 is None else d0) + np.cumsum(u * (t - t_prev)) * (1.0 + WHEEL_SCALE)
         last["wheel_t"], last["wheel_d"] = float(t[-1]), float(d[-1])
     camera: dict[int, np.ndarray] = {}
+    origin: tuple[int, int, int] | None = None  # GPS_GLOBAL_ORIGIN's degE7, degE7, mm, sent with each HEARTBEAT
     if opts.vision_rate > 0 and len(t):
         if last.get("vision_lat") is None:  # the camera frame's origin is counted from the first sample's position
             last["vision_lat"], last["vision_lon"], last["vision_h"] = (
                 math.radians(truth[0, 1]), math.radians(truth[0, 2]), float(truth[0, 3]))
         start = (last["vision_lat"], last["vision_lon"], last["vision_h"])
+        origin = (int(round(math.degrees(start[0]) * 1e7)), int(round(math.degrees(start[1]) * 1e7)),  # type: ignore[arg-type]
+                  int(round(start[2] * 1000)))  # type: ignore[operator]
         idx = np.flatnonzero(every("vision", opts.vision_rate))
         llh = np.column_stack([np.radians(truth[idx, 1]), np.radians(truth[idx, 2]), truth[idx, 3]])
         camera = dict(zip(idx.tolist(), camera_pose(llh, truth[idx, 10:14], truth[idx, 4:7], start, opts.vision,
@@ -180,10 +183,8 @@ def _piece_frames(run: SimRun, mav: mavlink.MAVLink, opts: StreamOptions, rng: n
         if send_hb[i]:
             out.append(mav.heartbeat_encode(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_GENERIC,
                                             mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 0, mavlink.MAV_STATE_ACTIVE))
-            if camera or (opts.vision_rate > 0 and last.get("vision_lat") is not None):
-                out.append(mav.gps_global_origin_encode(int(round(math.degrees(last["vision_lat"]) * 1e7)),  # type: ignore[arg-type]
-                                                        int(round(math.degrees(last["vision_lon"]) * 1e7)),  # type: ignore[arg-type]
-                                                        int(round(last["vision_h"] * 1000)), usec))  # type: ignore[operator]
+            if origin is not None:
+                out.append(mav.gps_global_origin_encode(*origin, usec))
         if opts.msg == "raw":
             acc = np.clip(np.round(f[i] / opts.raw_acc_scale), -32768, 32767).astype(int)
             gyr = np.clip(np.round(w[i] / opts.raw_gyro_scale), -32768, 32767).astype(int)

@@ -243,7 +243,9 @@ class LiveFilter:
         """A measurement stamped t_m (s, IMU clock): applied now if the solution has passed it,
         else when it does. Kinds: ``gnss`` (lat, lon rad, h m, vel NED or None, sigma_h, sigma_v,
         sigma_vel), ``gnss_yaw`` (the vehicle's heading rad, sigma rad; with GNSS aiding), ``baro`` (h m,
-        sigma), ``mag`` (m_b body), ``zupt`` (). A kind with a delay
+        sigma), ``mag`` (m_b body), ``zupt`` (), ``nhc`` (), ``wheel`` (speed m/s, sigma), ``vision_vel`` (NED
+        m/s, sigma), ``vision_body`` (body m/s, sigmas), ``vision_pose`` (position m, attitude body -> frame or
+        None, sigmas m and rad, reset_counter: :meth:`_vision_pose`). A kind with a delay
         (``--gnss-delay`` ...) was measured that long before t_m and is fused at that time: taken back
         along the solution like any measurement older than the last attitude update (kalman.py)."""
         aid = AIDING_OF.get(kind, kind)

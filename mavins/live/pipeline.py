@@ -284,9 +284,9 @@ class Pipeline:
         x y z in ``frame_id`` LOCAL_NED or LOCAL_FRD, q body -> frame w x y z, pose_covariance[21]): a camera's
         pose in its own local frame, whose origin and heading the filter estimates (docs/filter.md). The
         covariances are upper triangles of 6 x 6 (x y z roll pitch yaw), their diagonals used; a NaN first
-        element means unknown (VISION_SIGMA_POS, VISION_SIGMA_ATT). An ODOMETRY in another frame counts ``vision_frame_unsupported``,
-        a non-finite value or variance ``vision_invalid``; an attitude given as unknown (NaN) leaves the
-        position alone (``vision_pose`` with no attitude)."""
+        element means unknown (VISION_SIGMA_POS, VISION_SIGMA_ATT). An ODOMETRY in another frame counts
+        ``vision_frame_unsupported``, a non-finite value or variance ``vision_invalid``; an attitude given as
+        unknown (NaN) leaves the position alone (``vision_pose`` with no attitude)."""
         if name == "ODOMETRY":
             pos = (msg.x, msg.y, msg.z)  # type: ignore[attr-defined]
             if msg.frame_id not in VISION_POSE_FRAMES:  # type: ignore[attr-defined]
