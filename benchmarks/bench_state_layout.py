@@ -31,74 +31,107 @@ NOTES: list[str] = []
 BASELINE = "the same work on the float64 state vector by offsets (what the kernels use)"
 
 S_T, S_Q, S_C, S_V, S_VP, S_NK = sd.S_T, sd.S_Q, sd.S_C, sd.S_V, sd.S_VP, sd.S_NK
-RECORD = np.dtype([(f.name.lower(), np.float64, (f.size,)) if f.size > 1 else (f.name.lower(), np.float64)
-                   for f in sd.STATE_LAYOUT])  # the same fields, named
+RECORD = np.dtype((np.record, [(f.name.lower(), np.float64, (f.size,)) if f.size > 1 else (f.name.lower(), np.float64)
+                               for f in sd.STATE_LAYOUT]))  # the same fields, named (attributes in plain Python too)
+
+
+@numba.njit(cache=False)
+def _step_offsets(s: np.ndarray, dth: np.ndarray, dv: np.ndarray, dt: float) -> None:
+    """One step on the float64 vector through the S_* offsets."""
+    q0, q1, q2, q3 = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
+    h0, h1, h2 = 0.5 * dth[0], 0.5 * dth[1], 0.5 * dth[2]
+    r0 = q0 - q1 * h0 - q2 * h1 - q3 * h2
+    r1 = q1 + q0 * h0 + q2 * h2 - q3 * h1
+    r2 = q2 + q0 * h1 + q3 * h0 - q1 * h2
+    r3 = q3 + q0 * h2 + q1 * h1 - q2 * h0
+    nrm = 1.0 / np.sqrt(r0 * r0 + r1 * r1 + r2 * r2 + r3 * r3)
+    r0, r1, r2, r3 = r0 * nrm, r1 * nrm, r2 * nrm, r3 * nrm
+    s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3] = r0, r1, r2, r3
+    s[S_C] = r0 * r0 + r1 * r1 - r2 * r2 - r3 * r3
+    s[S_C + 1] = 2.0 * (r1 * r2 - r0 * r3)
+    s[S_C + 2] = 2.0 * (r1 * r3 + r0 * r2)
+    s[S_C + 3] = 2.0 * (r1 * r2 + r0 * r3)
+    s[S_C + 4] = r0 * r0 - r1 * r1 + r2 * r2 - r3 * r3
+    s[S_C + 5] = 2.0 * (r2 * r3 - r0 * r1)
+    s[S_C + 6] = 2.0 * (r1 * r3 - r0 * r2)
+    s[S_C + 7] = 2.0 * (r2 * r3 + r0 * r1)
+    s[S_C + 8] = r0 * r0 - r1 * r1 - r2 * r2 + r3 * r3
+    for i in range(3):
+        s[S_VP + i] = s[S_V + i]
+        s[S_V + i] += s[S_C + 3 * i] * dv[0] + s[S_C + 3 * i + 1] * dv[1] + s[S_C + 3 * i + 2] * dv[2]
+    s[S_V + 2] += 9.80665 * dt
+    s[S_NK] += 1.0
+    s[S_T] += dt
+
+
+@numba.njit(cache=False)
+def _step_record(r, dth: np.ndarray, dv: np.ndarray, dt: float) -> None:  # noqa: ANN001 (a numba Record)
+    """The same step on a record, by field name."""
+    q, c, v, vp = r.q, r.c, r.v, r.vp
+    q0, q1, q2, q3 = q[0], q[1], q[2], q[3]
+    h0, h1, h2 = 0.5 * dth[0], 0.5 * dth[1], 0.5 * dth[2]
+    r0 = q0 - q1 * h0 - q2 * h1 - q3 * h2
+    r1 = q1 + q0 * h0 + q2 * h2 - q3 * h1
+    r2 = q2 + q0 * h1 + q3 * h0 - q1 * h2
+    r3 = q3 + q0 * h2 + q1 * h1 - q2 * h0
+    nrm = 1.0 / np.sqrt(r0 * r0 + r1 * r1 + r2 * r2 + r3 * r3)
+    r0, r1, r2, r3 = r0 * nrm, r1 * nrm, r2 * nrm, r3 * nrm
+    q[0], q[1], q[2], q[3] = r0, r1, r2, r3
+    c[0] = r0 * r0 + r1 * r1 - r2 * r2 - r3 * r3
+    c[1] = 2.0 * (r1 * r2 - r0 * r3)
+    c[2] = 2.0 * (r1 * r3 + r0 * r2)
+    c[3] = 2.0 * (r1 * r2 + r0 * r3)
+    c[4] = r0 * r0 - r1 * r1 + r2 * r2 - r3 * r3
+    c[5] = 2.0 * (r2 * r3 - r0 * r1)
+    c[6] = 2.0 * (r1 * r3 - r0 * r2)
+    c[7] = 2.0 * (r2 * r3 + r0 * r1)
+    c[8] = r0 * r0 - r1 * r1 - r2 * r2 + r3 * r3
+    for i in range(3):
+        vp[i] = v[i]
+        v[i] += c[3 * i] * dv[0] + c[3 * i + 1] * dv[1] + c[3 * i + 2] * dv[2]
+    v[2] += 9.80665 * dt
+    r.nk += 1.0
+    r.t += dt
+
+
+@numba.njit(cache=False)
+def _step_view(s: np.ndarray, dth: np.ndarray, dv: np.ndarray, dt: float) -> None:
+    """The same step, the record taken over the float64 vector in this call."""
+    _step_record(s.view(RECORD)[0], dth, dv, dt)
 
 
 @numba.njit(cache=False)
 def steps_offsets(s: np.ndarray, n: int, dth: np.ndarray, dv: np.ndarray, dt: float) -> float:
     for _ in range(n):
-        q0, q1, q2, q3 = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
-        h0, h1, h2 = 0.5 * dth[0], 0.5 * dth[1], 0.5 * dth[2]
-        r0 = q0 - q1 * h0 - q2 * h1 - q3 * h2
-        r1 = q1 + q0 * h0 + q2 * h2 - q3 * h1
-        r2 = q2 + q0 * h1 + q3 * h0 - q1 * h2
-        r3 = q3 + q0 * h2 + q1 * h1 - q2 * h0
-        nrm = 1.0 / np.sqrt(r0 * r0 + r1 * r1 + r2 * r2 + r3 * r3)
-        r0, r1, r2, r3 = r0 * nrm, r1 * nrm, r2 * nrm, r3 * nrm
-        s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3] = r0, r1, r2, r3
-        s[S_C] = r0 * r0 + r1 * r1 - r2 * r2 - r3 * r3
-        s[S_C + 1] = 2.0 * (r1 * r2 - r0 * r3)
-        s[S_C + 2] = 2.0 * (r1 * r3 + r0 * r2)
-        s[S_C + 3] = 2.0 * (r1 * r2 + r0 * r3)
-        s[S_C + 4] = r0 * r0 - r1 * r1 + r2 * r2 - r3 * r3
-        s[S_C + 5] = 2.0 * (r2 * r3 - r0 * r1)
-        s[S_C + 6] = 2.0 * (r1 * r3 - r0 * r2)
-        s[S_C + 7] = 2.0 * (r2 * r3 + r0 * r1)
-        s[S_C + 8] = r0 * r0 - r1 * r1 - r2 * r2 + r3 * r3
-        for i in range(3):
-            s[S_VP + i] = s[S_V + i]
-            s[S_V + i] += s[S_C + 3 * i] * dv[0] + s[S_C + 3 * i + 1] * dv[1] + s[S_C + 3 * i + 2] * dv[2]
-        s[S_V + 2] += 9.80665 * dt
-        s[S_NK] += 1.0
-        s[S_T] += dt
+        _step_offsets(s, dth, dv, dt)
     return s[S_V] + s[S_C + 4]
 
 
 @numba.njit(cache=False)
 def steps_record(r: np.ndarray, n: int, dth: np.ndarray, dv: np.ndarray, dt: float) -> float:
-    s = r[0]
-    q, c, v, vp = s.q, s.c, s.v, s.vp
+    rec = r[0]
     for _ in range(n):
-        q0, q1, q2, q3 = q[0], q[1], q[2], q[3]
-        h0, h1, h2 = 0.5 * dth[0], 0.5 * dth[1], 0.5 * dth[2]
-        r0 = q0 - q1 * h0 - q2 * h1 - q3 * h2
-        r1 = q1 + q0 * h0 + q2 * h2 - q3 * h1
-        r2 = q2 + q0 * h1 + q3 * h0 - q1 * h2
-        r3 = q3 + q0 * h2 + q1 * h1 - q2 * h0
-        nrm = 1.0 / np.sqrt(r0 * r0 + r1 * r1 + r2 * r2 + r3 * r3)
-        r0, r1, r2, r3 = r0 * nrm, r1 * nrm, r2 * nrm, r3 * nrm
-        q[0], q[1], q[2], q[3] = r0, r1, r2, r3
-        c[0] = r0 * r0 + r1 * r1 - r2 * r2 - r3 * r3
-        c[1] = 2.0 * (r1 * r2 - r0 * r3)
-        c[2] = 2.0 * (r1 * r3 + r0 * r2)
-        c[3] = 2.0 * (r1 * r2 + r0 * r3)
-        c[4] = r0 * r0 - r1 * r1 + r2 * r2 - r3 * r3
-        c[5] = 2.0 * (r2 * r3 - r0 * r1)
-        c[6] = 2.0 * (r1 * r3 - r0 * r2)
-        c[7] = 2.0 * (r2 * r3 + r0 * r1)
-        c[8] = r0 * r0 - r1 * r1 - r2 * r2 + r3 * r3
-        for i in range(3):
-            vp[i] = v[i]
-            v[i] += c[3 * i] * dv[0] + c[3 * i + 1] * dv[1] + c[3 * i + 2] * dv[2]
-        v[2] += 9.80665 * dt
-        s.nk += 1.0
-        s.t += dt
-    return v[0] + c[4]
+        _step_record(rec, dth, dv, dt)
+    return rec.v[0] + rec.c[4]
+
+
+@numba.njit(cache=False)
+def steps_view_once(s: np.ndarray, n: int, dth: np.ndarray, dv: np.ndarray, dt: float) -> float:
+    rec = s.view(RECORD)[0]  # once, at the entry: the helpers take the record
+    for _ in range(n):
+        _step_record(rec, dth, dv, dt)
+    return s[S_V] + s[S_C + 4]
+
+
+@numba.njit(cache=False)
+def steps_view_each(s: np.ndarray, n: int, dth: np.ndarray, dv: np.ndarray, dt: float) -> float:
+    for _ in range(n):
+        _step_view(s, dth, dv, dt)
+    return s[S_V] + s[S_C + 4]
 
 
 def main(argv: Sequence[str] = ()) -> list[dict]:
-    """Time both layouts on the same work; one row each and the ratio."""
+    """Time the layouts on the same work; one row each and the ratio to the offsets."""
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--quick", action="store_true", help="200,000 steps instead of 2,000,000")
     args = p.parse_args(list(argv))
@@ -113,32 +146,55 @@ def main(argv: Sequence[str] = ()) -> list[dict]:
                 else s[sd.S_OFFSET[f.name]]
         return s, r
 
-    s, r = fresh()
-    a, b = steps_offsets(s, 10, dth, dv, dt), steps_record(r, 10, dth, dv, dt)  # compiled here
-    if a != b:
-        raise SystemExit("the two layouts gave different results")
-    best = {"offsets": np.inf, "record": np.inf}
-    for _ in range(5):
+    runs = {"offsets": (steps_offsets, "state by offsets (float64 vector, S_* from STATE_LAYOUT)"),
+            "record": (steps_record, "state as a numba record (same named fields)"),
+            "view_once": (steps_view_once, "record view of the float64 vector, taken once at the entry"),
+            "view_each": (steps_view_each, "record view of the float64 vector, taken in every step's call")}
+
+    def run_all(steps: int) -> dict[str, float]:
+        s, r = fresh()
+        args = {"offsets": s.copy(), "record": r, "view_once": s.copy(), "view_each": s.copy()}
+        out, secs = {}, {}
+        for name, (fn, _) in runs.items():
+            t0 = time.perf_counter()
+            out[name] = fn(args[name], steps, dth, dv, dt)
+            secs[name] = time.perf_counter() - t0
+        if len(set(out.values())) != 1:
+            raise SystemExit(f"the layouts gave different results: {out}")
+        return secs
+
+    run_all(10)  # compiled here
+    best = {name: np.inf for name in runs}
+    for _ in range(5):  # interleaved: the machine's load falls on every layout alike
+        for name, sec in run_all(n).items():
+            best[name] = min(best[name], sec)
+    rows = [{"case": case, "samples": n, "seconds": best[k], "rate": n / best[k],
+             "value": f"{1e9 * best[k] / n:.2f} ns/step", "ratio": best[k] / best["offsets"],
+             "baseline": "(is the baseline)" if k == "offsets" else "state by offsets"}
+            for k, (_, case) in runs.items()]
+    # plain Python (NUMBA_DISABLE_JIT=1: what mutation testing and a debugger run): the helpers' Python
+    m = n // 100
+    plain = {"offsets": np.inf, "record": np.inf}
+    for _ in range(3):
         s, r = fresh()
         t0 = time.perf_counter()
-        a = steps_offsets(s, n, dth, dv, dt)
-        best["offsets"] = min(best["offsets"], time.perf_counter() - t0)
+        for _ in range(m):
+            _step_offsets.py_func(s, dth, dv, dt)
+        plain["offsets"] = min(plain["offsets"], time.perf_counter() - t0)
+        rec = r[0]
         t0 = time.perf_counter()
-        b = steps_record(r, n, dth, dv, dt)
-        best["record"] = min(best["record"], time.perf_counter() - t0)
-        if a != b:
-            raise SystemExit("the two layouts gave different results")
+        for _ in range(m):
+            _step_record.py_func(rec, dth, dv, dt)
+        plain["record"] = min(plain["record"], time.perf_counter() - t0)
+        if s[S_V] != rec.v[0] or s[S_C + 4] != rec.c[4]:
+            raise SystemExit("the layouts gave different results in plain Python")
+    for k, case in (("offsets", "plain Python: state by offsets"), ("record", "plain Python: state as a record")):
+        rows.append({"case": case, "samples": m, "seconds": plain[k], "rate": m / plain[k],
+                     "value": f"{1e6 * plain[k] / m:.2f} us/step", "ratio": plain[k] / plain["offsets"],
+                     "baseline": "(is the baseline)" if k == "offsets" else "plain Python: state by offsets"})
     NOTES.clear()
-    NOTES.append(f"state layout: the same {n:,} steps bit for bit in both layouts (checked)")
-    return [
-        {"case": "state by offsets (float64 vector, S_* from STATE_LAYOUT)", "samples": n,
-         "seconds": best["offsets"], "rate": n / best["offsets"], "value": f"{1e9 * best['offsets'] / n:.2f} ns/step",
-         "ratio": 1.0, "baseline": "(is the baseline)"},
-        {"case": "state as a numba record (same named fields)", "samples": n, "seconds": best["record"],
-         "rate": n / best["record"], "value": f"{1e9 * best['record'] / n:.2f} ns/step",
-         "ratio": best["record"] / best["offsets"], "baseline": "state by offsets"},
-    ]
-
+    NOTES.append(f"state layout: the same {n:,} steps bit for bit in every layout (checked); each step one helper call")
+    return rows
 
 if __name__ == "__main__":
     from run_all import print_report
