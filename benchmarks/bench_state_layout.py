@@ -1,12 +1,17 @@
-"""The kernel's state: a float64 vector read by generated offsets (strapdown.STATE_LAYOUT, what the kernels
-use) against a numba record (a structured dtype with the same named fields), on the same work.
+"""The kernel's state: a float64 vector read by the named indices generated from strapdown.STATE_LAYOUT
+(``s[S.V + 2]``, what the kernels use) against a numba record (a structured dtype with the same named
+fields), on the same work.
 
-The work is the heart of a strapdown step on the state, done 2,000,000 times: the attitude quaternion
-turned by a small rotation vector and renormalised, its DCM rebuilt, the velocity advanced by the rotated
-specific force plus gravity, the previous velocity kept, the step counter and time advanced: every field
-read and written through the layout, as the kernel does. Both kernels are compiled before timing; the best
-of 5 runs of each, interleaved, so that the machine's load affects both alike. Ratio: the record's time
-over the offsets' (above 1: the record is slower).
+The work is the heart of a strapdown step on the state, done 2,000,000 times, one helper call per step
+as in the kernels: the attitude quaternion turned by a small rotation vector and renormalised, its DCM
+rebuilt, the velocity advanced by the rotated specific force plus gravity, the previous velocity kept,
+the step counter and time advanced: every field read and written through the layout. Four ways: the
+float64 vector by index; a record array; the record as a view of the float64 vector (what Python hands
+every kernel) taken once at the entry and passed to the helper; the view taken in every helper's call.
+Then the two helpers as plain Python (NUMBA_DISABLE_JIT=1: what mutation testing and a debugger run),
+20,000 steps. All compiled before timing; the best of 5 runs (3 in plain Python), interleaved, so that
+the machine's load affects all alike; the results checked bit for bit. Ratio: time over the index's
+(above 1: slower).
 
 Run from the repository root::
 
@@ -30,15 +35,15 @@ from mavins.core import strapdown as sd  # noqa: E402
 NOTES: list[str] = []
 BASELINE = "the same work on the float64 state vector by offsets (what the kernels use)"
 
-S_T, S_Q, S_C, S_V, S_VP, S_NK = sd.S_T, sd.S_Q, sd.S_C, sd.S_V, sd.S_VP, sd.S_NK
+S = sd.S  # the kernels' named indices
 RECORD = np.dtype((np.record, [(f.name.lower(), np.float64, (f.size,)) if f.size > 1 else (f.name.lower(), np.float64)
                                for f in sd.STATE_LAYOUT]))  # the same fields, named (attributes in plain Python too)
 
 
 @numba.njit(cache=False)
 def _step_offsets(s: np.ndarray, dth: np.ndarray, dv: np.ndarray, dt: float) -> None:
-    """One step on the float64 vector through the S_* offsets."""
-    q0, q1, q2, q3 = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
+    """One step on the float64 vector through the named indices S.<NAME>."""
+    q0, q1, q2, q3 = s[S.Q], s[S.Q + 1], s[S.Q + 2], s[S.Q + 3]
     h0, h1, h2 = 0.5 * dth[0], 0.5 * dth[1], 0.5 * dth[2]
     r0 = q0 - q1 * h0 - q2 * h1 - q3 * h2
     r1 = q1 + q0 * h0 + q2 * h2 - q3 * h1
@@ -46,22 +51,22 @@ def _step_offsets(s: np.ndarray, dth: np.ndarray, dv: np.ndarray, dt: float) -> 
     r3 = q3 + q0 * h2 + q1 * h1 - q2 * h0
     nrm = 1.0 / np.sqrt(r0 * r0 + r1 * r1 + r2 * r2 + r3 * r3)
     r0, r1, r2, r3 = r0 * nrm, r1 * nrm, r2 * nrm, r3 * nrm
-    s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3] = r0, r1, r2, r3
-    s[S_C] = r0 * r0 + r1 * r1 - r2 * r2 - r3 * r3
-    s[S_C + 1] = 2.0 * (r1 * r2 - r0 * r3)
-    s[S_C + 2] = 2.0 * (r1 * r3 + r0 * r2)
-    s[S_C + 3] = 2.0 * (r1 * r2 + r0 * r3)
-    s[S_C + 4] = r0 * r0 - r1 * r1 + r2 * r2 - r3 * r3
-    s[S_C + 5] = 2.0 * (r2 * r3 - r0 * r1)
-    s[S_C + 6] = 2.0 * (r1 * r3 - r0 * r2)
-    s[S_C + 7] = 2.0 * (r2 * r3 + r0 * r1)
-    s[S_C + 8] = r0 * r0 - r1 * r1 - r2 * r2 + r3 * r3
+    s[S.Q], s[S.Q + 1], s[S.Q + 2], s[S.Q + 3] = r0, r1, r2, r3
+    s[S.C] = r0 * r0 + r1 * r1 - r2 * r2 - r3 * r3
+    s[S.C + 1] = 2.0 * (r1 * r2 - r0 * r3)
+    s[S.C + 2] = 2.0 * (r1 * r3 + r0 * r2)
+    s[S.C + 3] = 2.0 * (r1 * r2 + r0 * r3)
+    s[S.C + 4] = r0 * r0 - r1 * r1 + r2 * r2 - r3 * r3
+    s[S.C + 5] = 2.0 * (r2 * r3 - r0 * r1)
+    s[S.C + 6] = 2.0 * (r1 * r3 - r0 * r2)
+    s[S.C + 7] = 2.0 * (r2 * r3 + r0 * r1)
+    s[S.C + 8] = r0 * r0 - r1 * r1 - r2 * r2 + r3 * r3
     for i in range(3):
-        s[S_VP + i] = s[S_V + i]
-        s[S_V + i] += s[S_C + 3 * i] * dv[0] + s[S_C + 3 * i + 1] * dv[1] + s[S_C + 3 * i + 2] * dv[2]
-    s[S_V + 2] += 9.80665 * dt
-    s[S_NK] += 1.0
-    s[S_T] += dt
+        s[S.VP + i] = s[S.V + i]
+        s[S.V + i] += s[S.C + 3 * i] * dv[0] + s[S.C + 3 * i + 1] * dv[1] + s[S.C + 3 * i + 2] * dv[2]
+    s[S.V + 2] += 9.80665 * dt
+    s[S.NK] += 1.0
+    s[S.T] += dt
 
 
 @numba.njit(cache=False)
@@ -104,7 +109,7 @@ def _step_view(s: np.ndarray, dth: np.ndarray, dv: np.ndarray, dt: float) -> Non
 def steps_offsets(s: np.ndarray, n: int, dth: np.ndarray, dv: np.ndarray, dt: float) -> float:
     for _ in range(n):
         _step_offsets(s, dth, dv, dt)
-    return s[S_V] + s[S_C + 4]
+    return s[S.V] + s[S.C + 4]
 
 
 @numba.njit(cache=False)
@@ -120,14 +125,14 @@ def steps_view_once(s: np.ndarray, n: int, dth: np.ndarray, dv: np.ndarray, dt: 
     rec = s.view(RECORD)[0]  # once, at the entry: the helpers take the record
     for _ in range(n):
         _step_record(rec, dth, dv, dt)
-    return s[S_V] + s[S_C + 4]
+    return s[S.V] + s[S.C + 4]
 
 
 @numba.njit(cache=False)
 def steps_view_each(s: np.ndarray, n: int, dth: np.ndarray, dv: np.ndarray, dt: float) -> float:
     for _ in range(n):
         _step_view(s, dth, dv, dt)
-    return s[S_V] + s[S_C + 4]
+    return s[S.V] + s[S.C + 4]
 
 
 def main(argv: Sequence[str] = ()) -> list[dict]:
@@ -142,11 +147,11 @@ def main(argv: Sequence[str] = ()) -> list[dict]:
         s = sd.init_state(0.0, 0.8, 0.1, 100.0, np.zeros(3), 0.0, 0.0, 0.5)
         r = np.zeros(1, dtype=RECORD)
         for f in sd.STATE_LAYOUT:
-            r[0][f.name.lower()] = s[sd.S_OFFSET[f.name]:sd.S_OFFSET[f.name] + f.size] if f.size > 1 \
-                else s[sd.S_OFFSET[f.name]]
+            at = getattr(sd.S, f.name)
+            r[0][f.name.lower()] = s[at:at + f.size] if f.size > 1 else s[at]
         return s, r
 
-    runs = {"offsets": (steps_offsets, "state by offsets (float64 vector, S_* from STATE_LAYOUT)"),
+    runs = {"offsets": (steps_offsets, "state by offsets (float64 vector, S.<NAME> from STATE_LAYOUT)"),
             "record": (steps_record, "state as a numba record (same named fields)"),
             "view_once": (steps_view_once, "record view of the float64 vector, taken once at the entry"),
             "view_each": (steps_view_each, "record view of the float64 vector, taken in every step's call")}
@@ -186,7 +191,7 @@ def main(argv: Sequence[str] = ()) -> list[dict]:
         for _ in range(m):
             _step_record.py_func(rec, dth, dv, dt)
         plain["record"] = min(plain["record"], time.perf_counter() - t0)
-        if s[S_V] != rec.v[0] or s[S_C + 4] != rec.c[4]:
+        if s[S.V] != rec.v[0] or s[S.C + 4] != rec.c[4]:
             raise SystemExit("the layouts gave different results in plain Python")
     for k, case in (("offsets", "plain Python: state by offsets"), ("record", "plain Python: state as a record")):
         rows.append({"case": case, "samples": m, "seconds": plain[k], "rate": m / plain[k],

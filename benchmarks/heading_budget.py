@@ -128,8 +128,8 @@ def budget(spec: em.ImuSpec, setup: str, sigma_vel: float, mag_rate: float = 0.0
             kf.update(x, P, h_vel, zero3, np.eye(3) * sigma_vel ** 2, 0.0, kf.ALL)
         if mag_rate > 0.0 and tk >= 1.0 - 1e-9 and abs(tk * mag_rate - round(tk * mag_rate)) < 1e-6:
             f_n = mag.field_n()
-            s_nav = np.zeros(sd.S_C + 9)  # mag_heading reads the attitude only
-            s_nav[sd.S_C:sd.S_C + 9] = c.ravel()
+            s_nav = np.zeros(sd.S.C + 9)  # mag_heading reads the attitude only
+            s_nav[sd.S.C:sd.S.C + 9] = c.ravel()
             _, h_mag, _ = kf.mag_heading(s_nav, f_n, math.radians(mag.declination),
                                          math.tan(math.radians(mag.inclination)), math.hypot(f_n[0], f_n[1]), sig_mag)
             kf.update(x, P, h_mag, np.zeros(1), r_mag, 0.0, kf.ALL)

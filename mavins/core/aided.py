@@ -152,7 +152,7 @@ def _propagate(s: np.ndarray, cfg: np.ndarray, spec: np.ndarray, P: np.ndarray, 
             c[i, j] = acc[3 * i + j] / T
     f_n = acc[9:12] / T
     lat, lon, h = sd.position(s, cfg, frame)
-    F = em.system_matrix(c, s[sd.S_V : sd.S_V + 3], lat, h, f_n, spec, cfg[sd.CFG_EARTH] > 0.5)
+    F = em.system_matrix(c, s[sd.S.V : sd.S.V + 3], lat, h, f_n, spec, cfg[sd.CFG_EARTH] > 0.5)
     em.motion_columns(F, c, acc[13:16] / T, acc[16:19] / T, spec)
     predict_active(P, F, em.noise_density(spec), T)
     if acc.shape[0] >= ACC_SIZE + NX * NX:  # a smoothed run: the transition since the last epoch (smoother.py)
@@ -213,10 +213,10 @@ def after_k_update(s: np.ndarray, cfg: np.ndarray, spec: np.ndarray, P: np.ndarr
     Returns the interval T (s). ``frame`` is strapdown.kernel_frame of cfg.
     """
     literally(frame)
-    tk = s[sd.S_T]
+    tk = s[sd.S.T]
     T = tk - sums[6]
     sums[6] = tk
-    c = s[sd.S_C : sd.S_C + 9]
+    c = s[sd.S.C : sd.S.C + 9]
     for a in range(3):
         acc[9 + a] += c[3 * a] * sums[3] + c[3 * a + 1] * sums[4] + c[3 * a + 2] * sums[5]
     for a in range(9):
@@ -233,7 +233,7 @@ def after_k_update(s: np.ndarray, cfg: np.ndarray, spec: np.ndarray, P: np.ndarr
         e = np.exp(-T / spec[em.SP_ACC_TAU])
         for a in range(3):
             bias[kf.B_GA + a] *= e
-    if int(s[sd.S_NK]) % predict_every == 0:
+    if int(s[sd.S.NK]) % predict_every == 0:
         _propagate(s, cfg, spec, P, acc, frame)
     return T
 
@@ -246,7 +246,7 @@ def push_rate_aided(s: np.ndarray, cfg: np.ndarray, spec: np.ndarray, P: np.ndar
     through strapdown.push_rate_scalars, then :func:`after_k_update` when it completed a k
     update. Same return codes and ``frame`` as push_rate_scalars."""
     literally(frame)
-    dt = t - s[sd.S_TJ]
+    dt = t - s[sd.S.TJ]
     cwx, cwy, cwz = kf.correct_gyro3(bias, wx, wy, wz, 1.0)
     cfx, cfy, cfz = kf.correct_accel3(bias, fx, fy, fz, 1.0)
     r = sd.push_rate_scalars(s, cfg, t, cwx, cwy, cwz, cfx, cfy, cfz, frame)
@@ -521,8 +521,8 @@ def run_aided(
             or P.shape[0] != NX or P.shape[1] != NX or bias.shape[0] != kf.B_SIZE:
         raise ValueError("run_aided: out needs ROW_SIZE columns, counts a row per kind, log 6 columns, P NX x NX, "
                          "bias B_SIZE values")
-    t_start = s[sd.S_T]
-    cont = s[sd.S_NK] > 0.0  # a continued run: rows at its time were used by the call before
+    t_start = s[sd.S.T]
+    cont = s[sd.S.NK] > 0.0  # a continued run: rows at its time were used by the call before
     ig = 0
     while ig < gnss.shape[0] and (gnss[ig, 0] < t_start or (cont and gnss[ig, 0] == t_start)):
         ig += 1
@@ -550,7 +550,7 @@ def run_aided(
     s_prior = np.empty(0)
     bias_prior = np.empty(0)
     sums = np.zeros(7)
-    sums[6] = s[sd.S_T]
+    sums[6] = s[sd.S.T]
     raw_sum = np.zeros(3)
     raw_t = 0.0
     dth_c = np.empty(3)
@@ -562,7 +562,7 @@ def run_aided(
     n_out = 0
     n_log = 0
     for i in range(t.shape[0]):
-        dt = t[i] - s[sd.S_TJ]
+        dt = t[i] - s[sd.S.TJ]
         if not dt > 0.0:
             continue
         dth_c[0], dth_c[1], dth_c[2] = kf.correct_gyro3(bias, dtheta[i, 0], dtheta[i, 1], dtheta[i, 2], dt)
@@ -576,7 +576,7 @@ def run_aided(
             raw_t += dt
         if sd.push_increment(s, cfg, t[i], dth_c, dv_c, GEOGRAPHIC) != 1:
             continue
-        tk = s[sd.S_T]
+        tk = s[sd.S.T]
         T = tk - sums[6]
         for a in range(3):
             w_ib[a] = sums[a] / T

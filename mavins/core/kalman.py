@@ -277,7 +277,7 @@ def feedback(s: np.ndarray, cfg: np.ndarray, bias: np.ndarray, x: np.ndarray) ->
 
     Attitude ``C <- exp(-[phi x]) C`` (``q <- r(-phi) (x) q``, the DCM from
     the quaternion, so both stay consistent); velocity ``v -= dv`` at k and
-    at k-1 (S_VP: the mid-interval extrapolation and Simpson's rule then see
+    at k-1 (S.VP: the mid-interval extrapolation and Simpson's rule then see
     one consistent history); position
     moved by ``-dp``: ``C_n^e <- C_n^e exp([xi x])`` with ``xi`` the transport
     rotation of that displacement (as strapdown.k_update moves it), height
@@ -285,23 +285,23 @@ def feedback(s: np.ndarray, cfg: np.ndarray, bias: np.ndarray, x: np.ndarray) ->
     refreshed (strapdown.sync_position); biases ``bias -= x[X_SENSORS:]``.
     """
     q0, q1, q2, q3 = quat_mul_s(rotvec_to_quat_s(-x[X_PHI], -x[X_PHI + 1], -x[X_PHI + 2]),
-                                (s[sd.S_Q], s[sd.S_Q + 1], s[sd.S_Q + 2], s[sd.S_Q + 3]))
+                                (s[sd.S.Q], s[sd.S.Q + 1], s[sd.S.Q + 2], s[sd.S.Q + 3]))
     qn = np.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
     q0, q1, q2, q3 = q0 / qn, q1 / qn, q2 / qn, q3 / qn
-    s[sd.S_Q], s[sd.S_Q + 1], s[sd.S_Q + 2], s[sd.S_Q + 3] = q0, q1, q2, q3
-    sd._put9(s, sd.S_C, quat_to_dcm_s((q0, q1, q2, q3)))
+    s[sd.S.Q], s[sd.S.Q + 1], s[sd.S.Q + 2], s[sd.S.Q + 3] = q0, q1, q2, q3
+    sd._put9(s, sd.S.C, quat_to_dcm_s((q0, q1, q2, q3)))
     for i in range(3):
-        s[sd.S_V + i] -= x[X_DV + i]
-        s[sd.S_VP + i] -= x[X_DV + i]
+        s[sd.S.V + i] -= x[X_DV + i]
+        s[sd.S.VP + i] -= x[X_DV + i]
     if cfg[sd.CFG_EARTH] > 0.5:
         lat, lon, h = sd.position(s, cfg, GEOGRAPHIC)
         # the transport rotation of the displacement (-dp_N, -dp_E), as strapdown._position_step moves C_n^e
         xn, xe, xd = earth.transport_rate_s(lat, h, -x[X_DP], -x[X_DP + 1])
-        sd._put9(s, sd.S_CNE, mat3_mul_s(sd._get9(s, sd.S_CNE), rotvec_to_dcm_s(xn, xe, xd)))
+        sd._put9(s, sd.S.CNE, mat3_mul_s(sd._get9(s, sd.S.CNE), rotvec_to_dcm_s(xn, xe, xd)))
     else:
         for i in range(3):
-            s[sd.S_PF + i] -= x[X_DP + i]
-    s[sd.S_H] += x[X_DP + 2]
+            s[sd.S.PF + i] -= x[X_DP + i]
+    s[sd.S.H] += x[X_DP + 2]
     sd.sync_position(s, cfg, GEOGRAPHIC)
     for i in range(B_SIZE):
         bias[i] -= x[X_SENSORS + i]
@@ -347,8 +347,8 @@ def yaw_reset(s: np.ndarray, cfg: np.ndarray, bias: np.ndarray, P: np.ndarray, d
     mn, me = metres_per_radian(s, cfg)
     x[X_DP] = (lat0 - lat) * mn
     x[X_DP + 1] = (lon0 - lon) * me
-    x[X_DV] = s[sd.S_V] - v_n
-    x[X_DV + 1] = s[sd.S_V + 1] - v_e
+    x[X_DV] = s[sd.S.V] - v_n
+    x[X_DV + 1] = s[sd.S.V + 1] - v_e
     feedback(s, cfg, bias, x)
     idx = (X_PHI + 2, X_DP, X_DP + 1, X_DV, X_DV + 1)
     var = (var_yaw, var_pos, var_pos, var_vel, var_vel)
@@ -369,7 +369,7 @@ def metres_per_radian(s: np.ndarray, cfg: np.ndarray) -> tuple[float, float]:
     if cfg[sd.CFG_EARTH] > 0.5:
         lat, lon, h = sd.position(s, cfg, GEOGRAPHIC)
     else:
-        lat, h = s[sd.S_LAT0], s[sd.S_H0]
+        lat, h = s[sd.S.LAT0], s[sd.S.H0]
     r_n, r_e = earth.radii(lat)
     return r_n + h, (r_e + h) * np.cos(lat)
 
@@ -395,12 +395,12 @@ def gnss_position(
     """
     lat, lon, h = sd.position(s, cfg, GEOGRAPHIC)
     mn, me = metres_per_radian(s, cfg)
-    c = s[sd.S_C : sd.S_C + 9].reshape(3, 3)
+    c = s[sd.S.C : sd.S.C + 9].reshape(3, 3)
     la = mat_vec(c, lever)
     nu = np.empty(3)
-    nu[0] = (lat - lat_m) * mn + la[0] - s[sd.S_V] * dt
-    nu[1] = wrap_pi(lon - lon_m) * me + la[1] - s[sd.S_V + 1] * dt
-    nu[2] = -(h - h_m) + la[2] - s[sd.S_V + 2] * dt
+    nu[0] = (lat - lat_m) * mn + la[0] - s[sd.S.V] * dt
+    nu[1] = wrap_pi(lon - lon_m) * me + la[1] - s[sd.S.V + 1] * dt
+    nu[2] = -(h - h_m) + la[2] - s[sd.S.V + 2] * dt
     H = np.zeros((3, NX))
     _set_skew(H, 0, X_PHI, la, -1.0)
     for i in range(3):
@@ -432,7 +432,7 @@ def gnss_velocity(
     gyro bias error db changes the rate by -db, so the lever-arm velocity by
     ``C (l x db)``.
     """
-    c = s[sd.S_C : sd.S_C + 9].reshape(3, 3)
+    c = s[sd.S.C : sd.S.C + 9].reshape(3, 3)
     wl = np.empty(3)
     wl[0] = w_ib[1] * lever[2] - w_ib[2] * lever[1]
     wl[1] = w_ib[2] * lever[0] - w_ib[0] * lever[2]
@@ -441,7 +441,7 @@ def gnss_velocity(
     a = dt / T if T > 0.0 else 0.0
     nu = np.empty(3)
     for i in range(3):
-        v_tm = s[sd.S_V + i] - a * (s[sd.S_V + i] - s[sd.S_VP + i])
+        v_tm = s[sd.S.V + i] - a * (s[sd.S.V + i] - s[sd.S.VP + i])
         nu[i] = v_tm + cwl[i] - v_m[i]
     H = np.zeros((3, NX))
     _set_skew(H, 0, X_PHI, cwl, -1.0)
@@ -477,7 +477,7 @@ def baro_height(
     +dt on dv_D, +1 on the offset.
     """
     nu = np.empty(1)
-    nu[0] = s[sd.S_H] + s[sd.S_V + 2] * dt + bias[B_BARO] - h_m
+    nu[0] = s[sd.S.H] + s[sd.S.V + 2] * dt + bias[B_BARO] - h_m
     H = np.zeros((1, NX))
     H[0, X_DP + 2] = -1.0
     H[0, X_DV + 2] = dt
@@ -494,7 +494,7 @@ def heading(s: np.ndarray, yaw_m: float, sigma: float) -> tuple[np.ndarray, np.n
     With ``C(est) = (I + [phi x]) C``, ``yaw = atan2(C21, C11)`` changes by
     ``dyaw = phi_D + tan(pitch) (phi_N cos yaw + phi_E sin yaw)``.
     """
-    c = s[sd.S_C : sd.S_C + 9].reshape(3, 3)
+    c = s[sd.S.C : sd.S.C + 9].reshape(3, 3)
     yaw = np.arctan2(c[1, 0], c[0, 0])
     hh = c[0, 0] * c[0, 0] + c[1, 0] * c[1, 0]
     nu = np.empty(1)
@@ -523,11 +523,11 @@ def mag_level(s: np.ndarray, cfg: np.ndarray, bias: np.ndarray, m_b: np.ndarray,
     laboratory mode). Without it a sample one 20 ms attitude interval old in a
     20 deg/s turn reads 0.4 deg off in heading. Then ``m = C m_b``.
     """
-    c = s[sd.S_C : sd.S_C + 9].reshape(3, 3)
+    c = s[sd.S.C : sd.S.C + 9].reshape(3, 3)
     w = w_ib.copy()
     if cfg[sd.CFG_EARTH] > 0.5:
         lat, lon, h = sd.position(s, cfg, GEOGRAPHIC)
-        w_in = earth.earth_rate_n(lat) + earth.transport_rate(lat, h, s[sd.S_V : sd.S_V + 3])
+        w_in = earth.earth_rate_n(lat) + earth.transport_rate(lat, h, s[sd.S.V : sd.S.V + 3])
         for i in range(3):
             w[i] -= c[0, i] * w_in[0] + c[1, i] * w_in[1] + c[2, i] * w_in[2]
     m_c = np.empty(3)
@@ -621,7 +621,7 @@ def mag_heading(
     atan2 at the model's field): ``H_mb = -g^T C``, with ``horizontal`` the
     horizontal strength ``|m_h|`` (the sample's unit, :func:`mag_horizontal`).
     """
-    c = s[sd.S_C : sd.S_C + 9].reshape(3, 3)
+    c = s[sd.S.C : sd.S.C + 9].reshape(3, 3)
     nu = np.empty(1)
     nu[0] = wrap_pi(np.arctan2(m[1], m[0]) - declination)
     H = np.zeros((1, NX))
@@ -660,8 +660,8 @@ def _body_rows(s: np.ndarray, first: int, v_b: np.ndarray, sigma: np.ndarray
     ``v_b[a]`` with 1-sigma ``sigma[a]``. With ``C(true) = (I - [phi x]) C(est)`` the estimate's error is
     ``dv_b = C^T dv + C^T [v x] phi`` (first order): the rows of ``C^T`` (on dv) and of ``C^T [v x]`` (on phi)
     are H; the innovation is predicted minus measured."""
-    c = s[sd.S_C:sd.S_C + 9]
-    v0, v1, v2 = s[sd.S_V], s[sd.S_V + 1], s[sd.S_V + 2]
+    c = s[sd.S.C:sd.S.C + 9]
+    v0, v1, v2 = s[sd.S.V], s[sd.S.V + 1], s[sd.S.V + 2]
     n = 3 - first
     nu = np.empty(n)
     H = np.zeros((n, NX))
@@ -696,11 +696,11 @@ def wheel_speed(s: np.ndarray, bias: np.ndarray, speed: float, w_ib: np.ndarray,
     ``(1 + k)`` times that on dv, phi and both gyro bias parts, and ``u`` on X_WS; the innovation is
     predicted minus measured, sigma m/s (Groves 2nd ed., chapters 6 and 16, odometers and their
     integration, section numbers not checked against the book; Shin 2005, a land vehicle's odometer)."""
-    c = s[sd.S_C:sd.S_C + 9]
+    c = s[sd.S.C:sd.S.C + 9]
     a = dt / T if T > 0.0 else 0.0
-    v0 = s[sd.S_V] - a * (s[sd.S_V] - s[sd.S_VP])
-    v1 = s[sd.S_V + 1] - a * (s[sd.S_V + 1] - s[sd.S_VP + 1])
-    v2 = s[sd.S_V + 2] - a * (s[sd.S_V + 2] - s[sd.S_VP + 2])
+    v0 = s[sd.S.V] - a * (s[sd.S.V] - s[sd.S.VP])
+    v1 = s[sd.S.V + 1] - a * (s[sd.S.V + 1] - s[sd.S.VP + 1])
+    v2 = s[sd.S.V + 2] - a * (s[sd.S.V + 2] - s[sd.S.VP + 2])
     c0, c1, c2 = c[0], c[3], c[6]  # column 0 of C: row x of C^T
     u = c0 * v0 + c1 * v1 + c2 * v2 + w_ib[1] * lever[2] - w_ib[2] * lever[1]
     g = 1.0 + bias[B_WS]
@@ -746,9 +746,9 @@ def vision_relative(s: np.ndarray, cfg: np.ndarray, bias: np.ndarray, ref: np.nd
     lat, lon, h = sd.position(s, cfg, GEOGRAPHIC)
     mn, me = metres_per_radian(s, cfg)
     d = np.empty(3)
-    d[0] = (lat - ref[0]) * mn - s[sd.S_V] * dt - bias[B_VP]
-    d[1] = wrap_pi(lon - ref[1]) * me - s[sd.S_V + 1] * dt - bias[B_VP + 1]
-    d[2] = (ref[2] - h) - s[sd.S_V + 2] * dt - bias[B_VP + 2]
+    d[0] = (lat - ref[0]) * mn - s[sd.S.V] * dt - bias[B_VP]
+    d[1] = wrap_pi(lon - ref[1]) * me - s[sd.S.V + 1] * dt - bias[B_VP + 1]
+    d[2] = (ref[2] - h) - s[sd.S.V + 2] * dt - bias[B_VP + 2]
     return d
 
 
@@ -787,7 +787,7 @@ def vision_attitude(s: np.ndarray, bias: np.ndarray, c_vb: np.ndarray, sigma: np
     e [z x])`` the product ``M = C(est) (Rz(psi) c_vb)^T = (I + [phi x]) (I - e [z x])`` is the rotation
     ``phi - e z`` (first order). nu is M's rotation vector (exact for any angle: dcm_to_rotvec); H is I on
     phi and ``-z`` on X_VY; R is the body-axis noise in NED, ``C diag(sigma^2) C^T``."""
-    cn = s[sd.S_C:sd.S_C + 9].reshape(3, 3)
+    cn = s[sd.S.C:sd.S.C + 9].reshape(3, 3)
     c, sn = _vision_axes(bias)
     meas = np.empty((3, 3))  # Rz(psi) c_vb: the camera's attitude in NED
     for j in range(3):
@@ -818,7 +818,7 @@ def vision_place(s: np.ndarray, cfg: np.ndarray, bias: np.ndarray, P: np.ndarray
     n_z`` and ``do = Rz (H_x x + b e + n_p)``: ``y = J x + L n``, so ``P_yx = J P``, ``P_yy = J P J^T + L N
     L^T`` (stochastic cloning of the state; Roumeliotis & Burdick, ICRA 2002, eq. 10-12, the augmentation
     of a state with a function of it). The pose's information is spent placing the frame, not fused."""
-    cn = s[sd.S_C:sd.S_C + 9]
+    cn = s[sd.S.C:sd.S.C + 9]
     bias[B_VY] = wrap_pi(np.arctan2(cn[3], cn[0]) - np.arctan2(c_vb[1, 0], c_vb[0, 0]))  # the Euler yaws equal
     for _ in range(2):  # then the innovation's down component zero (its H on X_VY is -1): Newton steps
         nu_a, _, _ = vision_attitude(s, bias, c_vb, sigma_att)
@@ -871,7 +871,7 @@ def zupt(s: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarra
     H = np.zeros((3, NX))
     R = np.zeros((3, 3))
     for i in range(3):
-        nu[i] = s[sd.S_V + i]
+        nu[i] = s[sd.S.V + i]
         H[i, X_DV + i] = 1.0
         R[i, i] = sigma * sigma
     return nu, H, R
@@ -894,7 +894,7 @@ def zaru(
     per axis, about ARW / sqrt(averaging time); the correlation between the
     averaged gyro noise and the attitude error is neglected.
     """
-    c = s[sd.S_C : sd.S_C + 9].reshape(3, 3)
+    c = s[sd.S.C : sd.S.C + 9].reshape(3, 3)
     w_ie = np.zeros(3)
     if cfg[sd.CFG_EARTH] > 0.5:
         lat, lon, h = sd.position(s, cfg, GEOGRAPHIC)

@@ -90,12 +90,12 @@ def nominal_difference(s_a: np.ndarray, bias_a: np.ndarray, s_b: np.ndarray, bia
     ``bias_a - bias_b``.
     """
     x = np.zeros(NX)
-    qa = (s_a[sd.S_Q], -s_a[sd.S_Q + 1], -s_a[sd.S_Q + 2], -s_a[sd.S_Q + 3])
-    d = quat_mul_s((s_b[sd.S_Q], s_b[sd.S_Q + 1], s_b[sd.S_Q + 2], s_b[sd.S_Q + 3]), qa)
+    qa = (s_a[sd.S.Q], -s_a[sd.S.Q + 1], -s_a[sd.S.Q + 2], -s_a[sd.S.Q + 3])
+    d = quat_mul_s((s_b[sd.S.Q], s_b[sd.S.Q + 1], s_b[sd.S.Q + 2], s_b[sd.S.Q + 3]), qa)
     rv = quat_to_rotvec(np.array([d[0], d[1], d[2], d[3]]))
     for i in range(3):
         x[X_PHI + i] = -rv[i]
-        x[X_DV + i] = s_a[sd.S_V + i] - s_b[sd.S_V + i]
+        x[X_DV + i] = s_a[sd.S.V + i] - s_b[sd.S.V + i]
     if cfg[sd.CFG_EARTH] > 0.5:
         lat_a, lon_a, h_a = sd.position(s_a, cfg, GEOGRAPHIC)
         lat_b, lon_b, h_b = sd.position(s_b, cfg, GEOGRAPHIC)
@@ -105,7 +105,7 @@ def nominal_difference(s_a: np.ndarray, bias_a: np.ndarray, s_b: np.ndarray, bia
         x[X_DP + 2] = h_b - h_a
     else:
         for i in range(3):
-            x[X_DP + i] = s_a[sd.S_PF + i] - s_b[sd.S_PF + i]
+            x[X_DP + i] = s_a[sd.S.PF + i] - s_b[sd.S.PF + i]
     for i in range(bias_a.shape[0]):
         x[X_SENSORS + i] = bias_a[i] - bias_b[i]
     return x

@@ -41,6 +41,7 @@ constant), so the geographic kernel carries none of the others' branches.
 
 from __future__ import annotations
 
+from collections import namedtuple
 from typing import NamedTuple
 
 import numpy as np
@@ -93,7 +94,7 @@ FRAMES = {"geographic": GEOGRAPHIC, "wander": WANDER, "free": FREE, "inertial": 
 
 # --- state vector: declared once -------------------------------------------
 class Slot(NamedTuple):
-    """A named run of the state vector ``s``: its name (``S_<NAME>`` is its first index), size and meaning."""
+    """A named run of the state vector ``s``: its name (``S.<NAME>`` is its first index), size and meaning."""
 
     name: str
     size: int
@@ -138,8 +139,8 @@ STATE_LAYOUT = (
     Slot("KT", 1, "l-cycle tan L/(R_E + h) (1/m)"),
     Slot("MW", 4, "wander/free: l-cycle horizontal transport-rate matrix M (1/m), rho_h^w = M v_h^w, 2x2 row-major"),
     Slot("RZ", 1, "wander/free: l-cycle vertical transport rate (rad/s): 0 (wander), Omega sin L (free)"),
-    Slot("RI", 3, "inertial: position r^i in ECI (m); S_V then holds v^i = dr^i/dt, S_C and S_Q C_b^i"),
-    Slot("GH", 2, "inertial: l-cycle gravitation x, y in ECI (m/s^2); z is S_G"),
+    Slot("RI", 3, "inertial: position r^i in ECI (m); S.V then holds v^i = dr^i/dt, S.C and S.Q C_b^i"),
+    Slot("GH", 2, "inertial: l-cycle gravitation x, y in ECI (m/s^2); z is S.G"),
     Slot("T0", 1, "inertial: time (s) at which ECI coincides with ECEF"),
     Slot("INI", 1, "inertial: 1 once the state is held in ECI"),
     Slot("FLAG", 1, "1 once the geographic frame was asked to navigate beyond GEO_LAT_LIMIT"),
@@ -148,14 +149,12 @@ STATE_LAYOUT = (
     Slot("GPP", 3, "inertial: the same of the l cycle before"),
     Slot("GN", 1, "inertial: l cycles in that history (0, 1, 2)"),
 )
-S_OFFSET = {f.name: sum(g.size for g in STATE_LAYOUT[:i]) for i, f in enumerate(STATE_LAYOUT)}
 S_SIZE = sum(f.size for f in STATE_LAYOUT)
-# the fields' first indices as module constants, in STATE_LAYOUT's order (numba takes module-level ints as
-# compile-time constants; tests/core/test_strapdown.py checks each S_<NAME> against S_OFFSET)
-(S_T, S_Q, S_C, S_V, S_VP, S_LATC, S_LONC, S_CNE, S_H, S_PF, S_LAT0, S_LON0, S_H0, S_VD0, S_WIE, S_WEN, S_G,
- S_G0, S_NK, S_NJ, S_BUFT, S_BTH, S_BDV, S_CONE, S_SCUL, S_ACCA, S_ACCV, S_PW, S_PFO, S_HAVEP, S_TJ, S_NL,
- S_KN, S_KE, S_KT, S_MW, S_RZ, S_RI, S_GH, S_T0, S_INI, S_FLAG, S_FLAGT, S_GP, S_GPP, S_GN) = \
-    (S_OFFSET[f.name] for f in STATE_LAYOUT)
+# Each slot's first index by name, generated from STATE_LAYOUT: ``s[S.V + 2]`` is v_D. Numba takes a global
+# named tuple as a compile-time constant, so that compiles to the load of a literal index (a numba record
+# of the same fields is no faster under the JIT and slower as plain Python: benchmarks/bench_state_layout.py).
+S = namedtuple("StateIndex", [f.name for f in STATE_LAYOUT])(
+    *(sum(g.size for g in STATE_LAYOUT[:i]) for i in range(len(STATE_LAYOUT))))
 
 # The geographic frame's transport rate has -v_E tan L/(R_E + h) in its vertical component:
 # beyond this latitude (55 km from a pole) it is clamped there and the state flagged, since
@@ -235,24 +234,24 @@ def init_state(
 ) -> np.ndarray:
     """A fresh state at time t (s); angles and lat/lon in rad, h in m, v NED m/s."""
     s = np.zeros(S_SIZE)
-    s[S_T] = t
-    s[S_TJ] = t
+    s[S.T] = t
+    s[S.TJ] = t
     c = euler_to_dcm_s(roll, pitch, yaw)
-    _put9(s, S_C, c)
-    s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3] = dcm_to_quat_s(c)
+    _put9(s, S.C, c)
+    s[S.Q], s[S.Q + 1], s[S.Q + 2], s[S.Q + 3] = dcm_to_quat_s(c)
     for i in range(3):
-        s[S_V + i] = v[i]
-        s[S_VP + i] = v[i]
-    _put9(s, S_CNE, earth.cne_from_latlon_s(lat, lon))
-    s[S_H] = h
-    s[S_LAT0] = lat
-    s[S_LON0] = lon
-    s[S_H0] = h
-    s[S_VD0] = v[2]
-    s[S_G0] = earth.gravity(lat, h)
-    s[S_LATC] = lat
-    s[S_LONC] = lon
-    s[S_KN] = 1.0 / (earth.radii(lat)[0] + h)
+        s[S.V + i] = v[i]
+        s[S.VP + i] = v[i]
+    _put9(s, S.CNE, earth.cne_from_latlon_s(lat, lon))
+    s[S.H] = h
+    s[S.LAT0] = lat
+    s[S.LON0] = lon
+    s[S.H0] = h
+    s[S.VD0] = v[2]
+    s[S.G0] = earth.gravity(lat, h)
+    s[S.LATC] = lat
+    s[S.LONC] = lon
+    s[S.KN] = 1.0 / (earth.radii(lat)[0] + h)
     return s
 
 
@@ -266,7 +265,7 @@ def _wander_latlon(s: np.ndarray) -> tuple[float, float, float, float]:
     in double precision) alpha is taken as 0: w's x axis is north and its y axis east, and the
     longitude is that of the east direction, as in :func:`earth.latlon_from_cne`.
     """
-    c = S_CNE
+    c = S.CNE
     c20, c21, c22 = s[c + 6], s[c + 7], s[c + 8]
     cl = np.hypot(c20, c21)
     lat = np.arctan2(-c22, cl)
@@ -283,21 +282,21 @@ def position(s: np.ndarray, cfg: np.ndarray, frame: int) -> tuple[float, float, 
     holds only its own branch (FREE shares WANDER's)."""
     literally(frame)
     if cfg[CFG_EARTH] > 0.5:
-        if frame == INERTIAL and s[S_INI] > 0.5:
-            lat, lon, h, _x, _y, _z, _r = _inertial_position(s, s[S_T])
+        if frame == INERTIAL and s[S.INI] > 0.5:
+            lat, lon, h, _x, _y, _z, _r = _inertial_position(s, s[S.T])
             return lat, lon, h
         if frame == WANDER:
             lat, lon, _ca, _sa = _wander_latlon(s)
-            return lat, lon, s[S_H]
-        c = S_CNE
+            return lat, lon, s[S.H]
+        c = S.CNE
         lat, lon = earth.latlon_from_cne_s(s[c + 1], s[c + 4], s[c + 6], s[c + 7], s[c + 8])
-        return lat, lon, s[S_H]
+        return lat, lon, s[S.H]
     # earth = none: flat NED offset mapped through the start point's radii.
-    r_n, r_e = earth.radii(s[S_LAT0])
-    h0 = s[S_H0]
-    lat = s[S_LAT0] + s[S_PF] / (r_n + h0)
-    lon = s[S_LON0] + s[S_PF + 1] / ((r_e + h0) * np.cos(s[S_LAT0]))
-    return lat, lon, h0 - s[S_PF + 2]
+    r_n, r_e = earth.radii(s[S.LAT0])
+    h0 = s[S.H0]
+    lat = s[S.LAT0] + s[S.PF] / (r_n + h0)
+    lon = s[S.LON0] + s[S.PF + 1] / ((r_e + h0) * np.cos(s[S.LAT0]))
+    return lat, lon, h0 - s[S.PF + 2]
 
 
 @kernel
@@ -305,10 +304,10 @@ def sync_position(s: np.ndarray, cfg: np.ndarray, frame: int) -> None:
     """Refresh the latitude/longitude kept beside C_n^e; call after writing C_n^e or h directly."""
     literally(frame)
     lat, lon, h = position(s, cfg, frame)
-    s[S_LATC] = lat
-    s[S_LONC] = lon
-    if frame == INERTIAL and s[S_INI] > 0.5:
-        s[S_H] = h
+    s[S.LATC] = lat
+    s[S.LONC] = lon
+    if frame == INERTIAL and s[S.INI] > 0.5:
+        s[S.H] = h
 
 
 @kernel
@@ -319,24 +318,24 @@ def solution_row(s: np.ndarray, cfg: np.ndarray, out: np.ndarray, frame: int) ->
     ``v^n = Rz(alpha) v^w`` and ``C_b^n = Rz(alpha) C_b^w`` (docs/algorithms.md).
     """
     literally(frame)
-    if frame == INERTIAL and s[S_INI] > 0.5:
+    if frame == INERTIAL and s[S.INI] > 0.5:
         _inertial_row(s, out)
         return
     if frame == WANDER:
         _wander_row(s, out)
         return
-    out[0] = s[S_T]
-    out[1] = s[S_LATC]
-    out[2] = s[S_LONC]
-    out[3] = s[S_H] if cfg[CFG_EARTH] > 0.5 else s[S_H0] - s[S_PF + 2]
-    out[4] = s[S_V]
-    out[5] = s[S_V + 1]
-    out[6] = s[S_V + 2]
-    c = S_C
+    out[0] = s[S.T]
+    out[1] = s[S.LATC]
+    out[2] = s[S.LONC]
+    out[3] = s[S.H] if cfg[CFG_EARTH] > 0.5 else s[S.H0] - s[S.PF + 2]
+    out[4] = s[S.V]
+    out[5] = s[S.V + 1]
+    out[6] = s[S.V + 2]
+    c = S.C
     out[7], out[8], out[9] = dcm_to_euler_s(s[c], s[c + 1], s[c + 3], s[c + 4], s[c + 6], s[c + 7], s[c + 8])
-    sign = -1.0 if s[S_Q] < 0.0 else 1.0  # the same rotation with a non-negative scalar part
+    sign = -1.0 if s[S.Q] < 0.0 else 1.0  # the same rotation with a non-negative scalar part
     for a in range(4):
-        out[10 + a] = sign * s[S_Q + a]
+        out[10 + a] = sign * s[S.Q + a]
 
 
 @kernel
@@ -353,11 +352,11 @@ def _write_ned_row(out: np.ndarray, t: float, lat: float, lon: float, h: float, 
 def _wander_row(s: np.ndarray, out: np.ndarray) -> None:
     """Solution row of the wander and free-azimuth frames: turned by the wander angle into NED."""
     lat, lon, ca, sa = _wander_latlon(s)
-    vx, vy = s[S_V], s[S_V + 1]
-    w0, w1, w2, w3, w4, w5, w6, w7, w8 = _get9(s, S_C)
+    vx, vy = s[S.V], s[S.V + 1]
+    w0, w1, w2, w3, w4, w5, w6, w7, w8 = _get9(s, S.C)
     c = (ca * w0 - sa * w3, ca * w1 - sa * w4, ca * w2 - sa * w5,
          sa * w0 + ca * w3, sa * w1 + ca * w4, sa * w2 + ca * w5, w6, w7, w8)
-    _write_ned_row(out, s[S_T], lat, lon, s[S_H], ca * vx - sa * vy, sa * vx + ca * vy, s[S_V + 2], c)
+    _write_ned_row(out, s[S.T], lat, lon, s[S.H], ca * vx - sa * vy, sa * vx + ca * vy, s[S.V + 2], c)
 
 
 @kernel
@@ -365,9 +364,9 @@ def _inertial_position(s: np.ndarray, t: float) -> tuple[float, float, float, fl
     """Latitude, longitude (rad), height (m), ECEF position (m) and R_E (m) of the inertial
     state at time t: ``r^e = Rz(-Omega (t - t0)) r^i`` (ECI = ECEF at t0). At a pole
     (``x = y = 0`` in e) the longitude is 0."""
-    th = earth.OMEGA * (t - s[S_T0])
+    th = earth.OMEGA * (t - s[S.T0])
     ct, st = np.cos(th), np.sin(th)
-    x, y, z = s[S_RI], s[S_RI + 1], s[S_RI + 2]
+    x, y, z = s[S.RI], s[S.RI + 1], s[S.RI + 2]
     xe, ye = ct * x + st * y, ct * y - st * x
     sl, cl, h, r_e = earth.geodetic_from_ecef_s(xe, ye, z)
     return np.arctan2(sl, cl), np.arctan2(ye, xe), h, xe, ye, z, r_e
@@ -377,17 +376,17 @@ def _inertial_position(s: np.ndarray, t: float) -> tuple[float, float, float, fl
 def _inertial_row(s: np.ndarray, out: np.ndarray) -> None:
     """Solution row of the inertial frame: ``v^e = C_i^e v^i - Omega x r^e``, ``v^n = C_e^n v^e``,
     ``C_b^n = C_e^n C_i^e C_b^i`` ([ZS] 2.1; [ZS1] eq. 1-3-14)."""
-    t = s[S_T]
+    t = s[S.T]
     lat, lon, h, xe, ye, _z, _r = _inertial_position(s, t)
-    th = earth.OMEGA * (t - s[S_T0])
+    th = earth.OMEGA * (t - s[S.T0])
     ct, st = np.cos(th), np.sin(th)
-    vx, vy, vz = s[S_V], s[S_V + 1], s[S_V + 2]
+    vx, vy, vz = s[S.V], s[S.V + 1], s[S.V + 2]
     vex = ct * vx + st * vy + earth.OMEGA * ye
     vey = ct * vy - st * vx - earth.OMEGA * xe
     n0, n1, n2, n3, n4, n5, n6, n7, n8 = earth.cne_from_latlon_s(lat, lon)
     cie = (ct, st, 0.0, -st, ct, 0.0, 0.0, 0.0, 1.0)
     cen = (n0, n3, n6, n1, n4, n7, n2, n5, n8)
-    c = mat3_mul_s(mat3_mul_s(cen, cie), _get9(s, S_C))
+    c = mat3_mul_s(mat3_mul_s(cen, cie), _get9(s, S.C))
     _write_ned_row(out, t, lat, lon, h, n0 * vex + n3 * vey + n6 * vz, n1 * vex + n4 * vey + n7 * vz,
                    n2 * vex + n5 * vey + n8 * vz, c)
 
@@ -396,23 +395,23 @@ def _inertial_row(s: np.ndarray, out: np.ndarray) -> None:
 def _enter_inertial(s: np.ndarray) -> None:
     """Turn a fresh NED state into the inertial frame at its time t0 (ECI = ECEF then):
     ``C_b^i = C_n^e C_b^n``, ``r^i = r^e``, ``v^i = C_n^e v^n + Omega x r^e`` ([ZS1] eq. 1-3-14)."""
-    cne = _get9(s, S_CNE)
+    cne = _get9(s, S.CNE)
     sl = -cne[8]
     r_e = earth.radii_sin(sl)[1]
-    h = s[S_H]
+    h = s[S.H]
     x, y = -(r_e + h) * cne[2], -(r_e + h) * cne[5]
-    s[S_RI], s[S_RI + 1], s[S_RI + 2] = x, y, (r_e * (1.0 - earth.E2) + h) * sl
-    for o in (S_V, S_VP):
+    s[S.RI], s[S.RI + 1], s[S.RI + 2] = x, y, (r_e * (1.0 - earth.E2) + h) * sl
+    for o in (S.V, S.VP):
         a, b, c = s[o], s[o + 1], s[o + 2]
         s[o] = cne[0] * a + cne[1] * b + cne[2] * c - earth.OMEGA * y
         s[o + 1] = cne[3] * a + cne[4] * b + cne[5] * c + earth.OMEGA * x
         s[o + 2] = cne[6] * a + cne[7] * b + cne[8] * c
-    c_bi = mat3_mul_s(cne, _get9(s, S_C))
-    _put9(s, S_C, c_bi)
-    s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3] = dcm_to_quat_s(c_bi)
-    s[S_T0] = s[S_T]
-    s[S_INI] = 1.0
-    s[S_GN] = 0.0
+    c_bi = mat3_mul_s(cne, _get9(s, S.C))
+    _put9(s, S.C, c_bi)
+    s[S.Q], s[S.Q + 1], s[S.Q + 2], s[S.Q + 3] = dcm_to_quat_s(c_bi)
+    s[S.T0] = s[S.T]
+    s[S.INI] = 1.0
+    s[S.GN] = 0.0
 
 
 @kernel
@@ -423,15 +422,15 @@ def _inertial_hold(s: np.ndarray, cfg: np.ndarray, vx: float, vy: float, vz: flo
 
     The move must not change the velocity relative to the Earth, so v^i gains ``Omega x dr``
     with the move dr; without it every update turned ``Omega cos L |dr|`` of it east."""
-    th = earth.OMEGA * (s[S_T] - s[S_T0])
+    th = earth.OMEGA * (s[S.T] - s[S.T0])
     ct, st = np.cos(th), np.sin(th)
-    x, y, z = s[S_RI], s[S_RI + 1], s[S_RI + 2]
+    x, y, z = s[S.RI], s[S.RI + 1], s[S.RI + 2]
     sl, _cl, h, r_e = earth.geodetic_from_ecef_s(ct * x + st * y, ct * y - st * x, z)
     k = 1.0 / (r_e + h)
     nx, ny, nz = x * k, y * k, sl  # the normal turned into ECI: the same x/(R_E + h) form
-    dh = s[S_H0] - h
-    s[S_RI], s[S_RI + 1], s[S_RI + 2] = x + dh * nx, y + dh * ny, z + dh * nz
-    dv = -s[S_VD0] - (nx * (vx + earth.OMEGA * y) + ny * (vy - earth.OMEGA * x) + nz * vz)
+    dh = s[S.H0] - h
+    s[S.RI], s[S.RI + 1], s[S.RI + 2] = x + dh * nx, y + dh * ny, z + dh * nz
+    dv = -s[S.VD0] - (nx * (vx + earth.OMEGA * y) + ny * (vy - earth.OMEGA * x) + nz * vz)
     sync_position(s, cfg, INERTIAL)
     wx, wy = -earth.OMEGA * dh * ny, earth.OMEGA * dh * nx  # Omega x dr, Omega = [0, 0, OMEGA]
     return vx + wx + dv * nx, vy + wy + dv * ny, vz + dv * nz
@@ -453,40 +452,45 @@ def _l_cycle_inertial(s: np.ndarray, cfg: np.ndarray, T: float, vmx: float, vmy:
     the Schuler loop integrates (docs/algorithms.md, "Mechanisation frames", accuracy).
     """
     ht = 0.5 * T
-    th = earth.OMEGA * (s[S_T] + ht - s[S_T0])
+    th = earth.OMEGA * (s[S.T] + ht - s[S.T0])
     ct, st = np.cos(th), np.sin(th)
     qt = 0.25 * T
-    x = s[S_RI] + qt * (s[S_V] + vmx)
-    y = s[S_RI + 1] + qt * (s[S_V + 1] + vmy)
-    z = s[S_RI + 2] + qt * (s[S_V + 2] + vmz)
+    x = s[S.RI] + qt * (s[S.V] + vmx)
+    y = s[S.RI + 1] + qt * (s[S.V + 1] + vmy)
+    z = s[S.RI + 2] + qt * (s[S.V + 2] + vmz)
     xe, ye = ct * x + st * y, ct * y - st * x
     sl, _cl, h, r_e = earth.geodetic_from_ecef_s(xe, ye, z)
     g = earth.gravity_sin(sl, r_e, h)
     k = g / (r_e + h) + earth.OMEGA * earth.OMEGA
     gx, gy = -k * xe, -k * ye
     for i in range(3):
-        s[S_WIE + i] = 0.0
-        s[S_WEN + i] = 0.0
+        s[S.WIE + i] = 0.0
+        s[S.WEN + i] = 0.0
     gx, gy, gz = ct * gx - st * gy, st * gx + ct * gy, -g * sl
     cx = cy = cz = 0.0
-    if s[S_GN] > 1.5:
+    if s[S.GN] > 1.5:
         m = cfg[CFG_L_EVERY]
         k = 1.0 / (24.0 * m * m)
-        cx = k * (gx - 2.0 * s[S_GP] + s[S_GPP])
-        cy = k * (gy - 2.0 * s[S_GP + 1] + s[S_GPP + 1])
-        cz = k * (gz - 2.0 * s[S_GP + 2] + s[S_GPP + 2])
+        cx = k * (gx - 2.0 * s[S.GP] + s[S.GPP])
+        cy = k * (gy - 2.0 * s[S.GP + 1] + s[S.GPP + 1])
+        cz = k * (gz - 2.0 * s[S.GP + 2] + s[S.GPP + 2])
     else:
-        s[S_GN] += 1.0
+        s[S.GN] += 1.0
     for i in range(3):
-        s[S_GPP + i] = s[S_GP + i]
-    s[S_GP], s[S_GP + 1], s[S_GP + 2] = gx, gy, gz
-    s[S_GH], s[S_GH + 1], s[S_G] = gx + cx, gy + cy, gz + cz
+        s[S.GPP + i] = s[S.GP + i]
+    s[S.GP], s[S.GP + 1], s[S.GP + 2] = gx, gy, gz
+    s[S.GH], s[S.GH + 1], s[S.G] = gx + cx, gy + cy, gz + cz
 
 
 # --- state access for the stateful shells (engine, filter) ------------------
 def state_time(s: np.ndarray) -> float:
     """Time (s) of the state's last k update."""
-    return float(s[S_T])
+    return float(s[S.T])
+
+
+def body_to_nav(s: np.ndarray) -> np.ndarray:
+    """``C_b^n`` of the state, row-major (9, a view): the navigation frame's (NED, or the wander frame's)."""
+    return s[S.C:S.C + 9]
 
 
 def frame_limit(s: np.ndarray) -> float | None:
@@ -494,7 +498,7 @@ def frame_limit(s: np.ndarray) -> float | None:
 
     From then on its solution is not trustworthy (finite, but the transport rate is clamped).
     """
-    return float(s[S_FLAGT]) if s[S_FLAG] > 0.5 else None
+    return float(s[S.FLAGT]) if s[S.FLAG] > 0.5 else None
 
 
 def skip_to(s: np.ndarray, t: float) -> None:
@@ -503,8 +507,8 @@ def skip_to(s: np.ndarray, t: float) -> None:
     For a sensor-time gap that must not be integrated: the next sample covers
     only its own nominal interval, and with sampled rates it opens a fresh one.
     """
-    s[S_TJ] = max(s[S_TJ], t)
-    s[S_HAVEP] = 0.0
+    s[S.TJ] = max(s[S.TJ], t)
+    s[S.HAVEP] = 0.0
 
 
 # --- the k cycle in named steps -------------------------------------------
@@ -566,8 +570,8 @@ def _body_increments(s: np.ndarray, cfg: np.ndarray, n: int) -> tuple[float, flo
     summed velocity increment and its sculling term (m/s), body frame ([TW11] 11.2.2, 11.3; coning.py)."""
     sx = sy = sz = vx = vy = vz = 0.0
     for i in range(n):
-        j = S_BTH + 3 * i
-        m = S_BDV + 3 * i
+        j = S.BTH + 3 * i
+        m = S.BDV + 3 * i
         sx += s[j]
         sy += s[j + 1]
         sz += s[j + 2]
@@ -577,11 +581,11 @@ def _body_increments(s: np.ndarray, cfg: np.ndarray, n: int) -> tuple[float, flo
     cx = cy = cz = ux = uy = uz = 0.0
     if cfg[CFG_CONING] > 0.5 and n >= 2:
         if cfg[CFG_SAMPLED] > 0.5:
-            cx, cy, cz = s[S_CONE], s[S_CONE + 1], s[S_CONE + 2]
-            ux, uy, uz = s[S_SCUL], s[S_SCUL + 1], s[S_SCUL + 2]
+            cx, cy, cz = s[S.CONE], s[S.CONE + 1], s[S.CONE + 2]
+            ux, uy, uz = s[S.SCUL], s[S.SCUL + 1], s[S.SCUL + 2]
         else:
-            cx, cy, cz = nsample_coning(s, S_BTH, n)
-            ux, uy, uz = nsample_sculling(s, S_BTH, S_BDV, n)
+            cx, cy, cz = nsample_coning(s, S.BTH, n)
+            ux, uy, uz = nsample_sculling(s, S.BTH, S.BDV, n)
     return sx + cx, sy + cy, sz + cz, vx, vy, vz, ux, uy, uz
 
 
@@ -594,9 +598,9 @@ def _l_cycle(s: np.ndarray, cfg: np.ndarray, frame: int, T: float, lat: float, h
     literally(frame)
     if cfg[CFG_EARTH] < 0.5:
         for i in range(3):
-            s[S_WIE + i] = 0.0
-            s[S_WEN + i] = 0.0
-        s[S_G] = s[S_G0]
+            s[S.WIE + i] = 0.0
+            s[S.WEN + i] = 0.0
+        s[S.G] = s[S.G0]
         return
     if frame == WANDER:
         _l_cycle_wander(s, cfg, T, h, vmx, vmy, vmz)
@@ -604,25 +608,25 @@ def _l_cycle(s: np.ndarray, cfg: np.ndarray, frame: int, T: float, lat: float, h
     if frame == INERTIAL:
         _l_cycle_inertial(s, cfg, T, vmx, vmy, vmz)
         return
-    lat_mid = lat + 0.5 * T * vmx * s[S_KN]
+    lat_mid = lat + 0.5 * T * vmx * s[S.KN]
     if abs(lat_mid) > GEO_LAT_LIMIT:
-        if s[S_FLAG] < 0.5:
-            s[S_FLAG] = 1.0
-            s[S_FLAGT] = s[S_T]
+        if s[S.FLAG] < 0.5:
+            s[S.FLAG] = 1.0
+            s[S.FLAGT] = s[S.T]
         lat_mid = GEO_LAT_LIMIT if lat_mid > 0.0 else -GEO_LAT_LIMIT
     h_mid = h - 0.5 * T * vmz
     kn, ke, kt, wn, wd, g = earth.nav_terms(lat_mid, h_mid)
-    s[S_KN], s[S_KE], s[S_KT] = kn, ke, kt
-    s[S_WIE], s[S_WIE + 1], s[S_WIE + 2] = wn, 0.0, wd
-    s[S_WEN], s[S_WEN + 1], s[S_WEN + 2] = vmy * ke, -vmx * kn, -vmy * kt
-    s[S_G] = g
+    s[S.KN], s[S.KE], s[S.KT] = kn, ke, kt
+    s[S.WIE], s[S.WIE + 1], s[S.WIE + 2] = wn, 0.0, wd
+    s[S.WEN], s[S.WEN + 1], s[S.WEN + 2] = vmy * ke, -vmx * kn, -vmy * kt
+    s[S.G] = g
 
 
 @kernel
 def _wander_terms(s: np.ndarray, r0: float, r1: float, r2: float, h: float, free: bool) -> float:
     """Transport-rate coefficients of the wander (or free-azimuth) frame at the point whose
     ``C_w^e`` third row is ``(r0, r1, r2) = (cos L cos alpha, -cos L sin alpha, -sin L)``, height
-    h (m); stores them in S_MW, S_RZ and returns gravity (m/s^2, down).
+    h (m); stores them in S.MW, S.RZ and returns gravity (m/s^2, down).
 
     The NED transport rate ``[v_E k_E, -v_N k_N]`` turned into w (``v^n = Rz(alpha) v^w``) is
     ``M v_h^w`` with ``M = (k_E + k_N)/2 J + kappa [[-2 r0 r1, r0^2 - r1^2], [r0^2 - r1^2, 2 r0 r1]]``,
@@ -639,8 +643,8 @@ def _wander_terms(s: np.ndarray, r0: float, r1: float, r2: float, h: float, free
     kap = -0.5 * earth.E2 * r_e / (1.0 - earth.E2 * sl * sl) * ke * kn
     d = r0 * r0 - r1 * r1
     x2 = -2.0 * r0 * r1
-    s[S_MW], s[S_MW + 1], s[S_MW + 2], s[S_MW + 3] = kap * x2, a + kap * d, kap * d - a, -kap * x2
-    s[S_RZ] = earth.OMEGA * sl if free else 0.0
+    s[S.MW], s[S.MW + 1], s[S.MW + 2], s[S.MW + 3] = kap * x2, a + kap * d, kap * d - a, -kap * x2
+    s[S.RZ] = earth.OMEGA * sl if free else 0.0
     return earth.gravity_sin(sl, r_e, h)
 
 
@@ -653,23 +657,23 @@ def _l_cycle_wander(s: np.ndarray, cfg: np.ndarray, T: float, h: float, vmx: flo
     ``[M v_h, rho_z]`` and gravity at the extrapolated mid-interval point, whose third row is
     ``r + T/2 r x rho`` (first order of ``dC_w^e/dt = C_w^e [rho x]``), h - T/2 v_D.
     """
-    c = S_CNE
+    c = S.CNE
     r0, r1, r2 = s[c + 6], s[c + 7], s[c + 8]
     free = int(cfg[CFG_FRAME]) == FREE
-    if s[S_NK] < 0.5:
+    if s[S.NK] < 0.5:
         _wander_terms(s, r0, r1, r2, h, free)  # first cycle: coefficients at the start point
-    px = s[S_MW] * vmx + s[S_MW + 1] * vmy
-    py = s[S_MW + 2] * vmx + s[S_MW + 3] * vmy
-    pz = s[S_RZ]
+    px = s[S.MW] * vmx + s[S.MW + 1] * vmy
+    py = s[S.MW + 2] * vmx + s[S.MW + 3] * vmy
+    pz = s[S.RZ]
     ht = 0.5 * T
     m0 = r0 + ht * (r1 * pz - r2 * py)
     m1 = r1 + ht * (r2 * px - r0 * pz)
     m2 = r2 + ht * (r0 * py - r1 * px)
-    s[S_G] = _wander_terms(s, m0, m1, m2, h - ht * vmz, free)
-    s[S_WIE], s[S_WIE + 1], s[S_WIE + 2] = earth.OMEGA * m0, earth.OMEGA * m1, earth.OMEGA * m2
-    s[S_WEN] = s[S_MW] * vmx + s[S_MW + 1] * vmy
-    s[S_WEN + 1] = s[S_MW + 2] * vmx + s[S_MW + 3] * vmy
-    s[S_WEN + 2] = s[S_RZ]
+    s[S.G] = _wander_terms(s, m0, m1, m2, h - ht * vmz, free)
+    s[S.WIE], s[S.WIE + 1], s[S.WIE + 2] = earth.OMEGA * m0, earth.OMEGA * m1, earth.OMEGA * m2
+    s[S.WEN] = s[S.MW] * vmx + s[S.MW + 1] * vmy
+    s[S.WEN + 1] = s[S.MW + 2] * vmx + s[S.MW + 3] * vmy
+    s[S.WEN + 2] = s[S.RZ]
 
 
 @kernel
@@ -695,7 +699,7 @@ def _velocity_step(s: np.ndarray, T: float, sgx: float, sgy: float, sgz: float, 
     bx = vsx + rcx + scx
     by = vsy + rcy + scy
     bz = vsz + rcz + scz
-    c0, c1, c2, c3, c4, c5, c6, c7, c8 = _get9(s, S_C)
+    c0, c1, c2, c3, c4, c5, c6, c7, c8 = _get9(s, S.C)
     ux = c0 * bx + c1 * by + c2 * bz
     uy = c3 * bx + c4 * by + c5 * bz
     uz = c6 * bx + c7 * by + c8 * bz
@@ -706,11 +710,11 @@ def _velocity_step(s: np.ndarray, T: float, sgx: float, sgy: float, sgz: float, 
     ax, ay, az = py * uz - pz * uy, pz * ux - px * uz, px * uy - py * ux
     bx, by, bz = zy * az - zz * ay, zz * ax - zx * az, zx * ay - zy * ax
     ux, uy, uz = ux - 0.5 * ax + c12 * bx, uy - 0.5 * ay + c12 * by, uz - 0.5 * az + c12 * bz
-    wix, wiy, wiz = s[S_WIE], s[S_WIE + 1], s[S_WIE + 2]
-    ox, oy, oz = 2.0 * wix + s[S_WEN], 2.0 * wiy + s[S_WEN + 1], 2.0 * wiz + s[S_WEN + 2]
-    vnx = s[S_V] + ux - (oy * vmz - oz * vmy) * T
-    vny = s[S_V + 1] + uy - (oz * vmx - ox * vmz) * T
-    vnz = s[S_V + 2] + uz - (ox * vmy - oy * vmx) * T + s[S_G] * T
+    wix, wiy, wiz = s[S.WIE], s[S.WIE + 1], s[S.WIE + 2]
+    ox, oy, oz = 2.0 * wix + s[S.WEN], 2.0 * wiy + s[S.WEN + 1], 2.0 * wiz + s[S.WEN + 2]
+    vnx = s[S.V] + ux - (oy * vmz - oz * vmy) * T
+    vny = s[S.V + 1] + uy - (oz * vmx - ox * vmz) * T
+    vnz = s[S.V + 2] + uz - (ox * vmy - oy * vmx) * T + s[S.G] * T
     return vnx, vny, vnz
 
 
@@ -723,13 +727,13 @@ def _attitude_step(s: np.ndarray, cfg: np.ndarray, sgx: float, sgy: float, sgz: 
     xi`` (:func:`_k_cycle`)."""
     order = int(cfg[CFG_ORDER])
     if cfg[CFG_DCM] > 0.5:
-        c_new = mat3_mul_s(mat3_mul_s(rotvec_to_dcm_s(-zx, -zy, -zz), _get9(s, S_C)),
+        c_new = mat3_mul_s(mat3_mul_s(rotvec_to_dcm_s(-zx, -zy, -zz), _get9(s, S.C)),
                            body_update_dcm(sgx, sgy, sgz, order))
         k = int(cfg[CFG_ORTHO_EVERY])
-        if k > 0 and (int(s[S_NK]) + 1) % k == 0:
+        if k > 0 and (int(s[S.NK]) + 1) % k == 0:
             c_new = orthonormalize_s(c_new)
-        _put9(s, S_C, c_new)
-        s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3] = dcm_to_quat_s(c_new)
+        _put9(s, S.C, c_new)
+        s[S.Q], s[S.Q + 1], s[S.Q + 2], s[S.Q + 3] = dcm_to_quat_s(c_new)
         return
     # q + q (x) (r(sigma) - 1), then q + (r(-zeta) - 1) (x) q: the same product, with the
     # increments added to q rather than q multiplied by quaternions 1e-12 short of 1, and the
@@ -737,7 +741,7 @@ def _attitude_step(s: np.ndarray, cfg: np.ndarray, sgx: float, sgy: float, sgz: 
     # every update in double precision, the rounding turned the attitude by 3e-16 rad/s in
     # the inertial frame (0.4 prad in 1200 s against the same products in extended precision),
     # about a micrometre of position in a quarter Schuler period; this way 100 times less.
-    q0, q1, q2, q3 = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
+    q0, q1, q2, q3 = s[S.Q], s[S.Q + 1], s[S.Q + 2], s[S.Q + 3]
     d0, d1, d2, d3 = quat_mul_s((q0, q1, q2, q3), body_update_quat_minus_one(sgx, sgy, sgz, order))
     q0, q1, q2, q3 = q0 + d0, q1 + d1, q2 + d2, q3 + d3
     d0, d1, d2, d3 = quat_mul_s(body_update_quat_minus_one(-zx, -zy, -zz, 0), (q0, q1, q2, q3))
@@ -746,8 +750,8 @@ def _attitude_step(s: np.ndarray, cfg: np.ndarray, sgx: float, sgy: float, sgz: 
     if abs(n2 - 1.0) > QUAT_NORM_TOL:
         qn = np.sqrt(n2)
         q0, q1, q2, q3 = q0 / qn, q1 / qn, q2 / qn, q3 / qn
-    s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3] = q0, q1, q2, q3
-    _put9(s, S_C, quat_to_dcm_s((q0, q1, q2, q3)))
+    s[S.Q], s[S.Q + 1], s[S.Q + 2], s[S.Q + 3] = q0, q1, q2, q3
+    _put9(s, S.C, quat_to_dcm_s((q0, q1, q2, q3)))
 
 
 @kernel
@@ -771,7 +775,7 @@ def _rotate_position(s: np.ndarray, x: float, y: float, z: float) -> None:
     d0, d4, d8 = -a2 * (yy + zz), -a2 * (xx + zz), -a2 * (xx + yy)
     d1, d2, d3 = -a1 * z + a2 * x * y, a1 * y + a2 * x * z, a1 * z + a2 * x * y
     d5, d6, d7 = -a1 * x + a2 * y * z, -a1 * y + a2 * x * z, a1 * x + a2 * y * z
-    o = S_CNE
+    o = S.CNE
     for r in range(3):
         i = o + 3 * r
         c0, c1, c2 = s[i], s[i + 1], s[i + 2]
@@ -790,7 +794,7 @@ def _position_step(s: np.ndarray, cfg: np.ndarray, frame: int, T: float, vnx: fl
     effective-velocity midpoint at 100 Hz, below double precision in xi). Returns xi (rad; 0 in
     the inertial frame and without the Earth model)."""
     literally(frame)
-    vox, voy, voz = s[S_V], s[S_V + 1], s[S_V + 2]
+    vox, voy, voz = s[S.V], s[S.V + 1], s[S.V + 2]
     rule = int(cfg[CFG_POSINT])
     if rule == 0:
         ex, ey, ez = vox, voy, voz
@@ -801,31 +805,31 @@ def _position_step(s: np.ndarray, cfg: np.ndarray, frame: int, T: float, vnx: fl
         # last interval: (-v(k-2) + 8 v(k-1) + 5 v(k)) / 12. The lecture's
         # printed Simpson line covers two intervals with one-interval weights;
         # see docs/algorithms.md.
-        ex = (-s[S_VP] + 8.0 * vox + 5.0 * vnx) / 12.0
-        ey = (-s[S_VP + 1] + 8.0 * voy + 5.0 * vny) / 12.0
-        ez = (-s[S_VP + 2] + 8.0 * voz + 5.0 * vnz) / 12.0
+        ex = (-s[S.VP] + 8.0 * vox + 5.0 * vnx) / 12.0
+        ey = (-s[S.VP + 1] + 8.0 * voy + 5.0 * vny) / 12.0
+        ez = (-s[S.VP + 2] + 8.0 * voz + 5.0 * vnz) / 12.0
     xn = xe = xd = 0.0
     if frame == INERTIAL:
-        s[S_RI] += ex * T
-        s[S_RI + 1] += ey * T
-        s[S_RI + 2] += ez * T
+        s[S.RI] += ex * T
+        s[S.RI + 1] += ey * T
+        s[S.RI + 2] += ez * T
     elif cfg[CFG_EARTH] > 0.5:
         if frame == GEOGRAPHIC:
-            xn, xe, xd = ey * s[S_KE] * T, -ex * s[S_KN] * T, -ey * s[S_KT] * T
+            xn, xe, xd = ey * s[S.KE] * T, -ex * s[S.KN] * T, -ey * s[S.KT] * T
         else:
-            xn = (s[S_MW] * ex + s[S_MW + 1] * ey) * T
-            xe = (s[S_MW + 2] * ex + s[S_MW + 3] * ey) * T
-            xd = s[S_RZ] * T
+            xn = (s[S.MW] * ex + s[S.MW + 1] * ey) * T
+            xe = (s[S.MW + 2] * ex + s[S.MW + 3] * ey) * T
+            xd = s[S.RZ] * T
         _rotate_position(s, xn, xe, xd)
     else:
-        s[S_PF] += ex * T
-        s[S_PF + 1] += ey * T
-        s[S_PF + 2] += ez * T
+        s[S.PF] += ex * T
+        s[S.PF + 1] += ey * T
+        s[S.PF + 2] += ez * T
     if cfg[CFG_VHOLD] > 0.5:
-        s[S_H] = s[S_H0]
-        s[S_PF + 2] = 0.0
+        s[S.H] = s[S.H0]
+        s[S.PF + 2] = 0.0
     else:
-        s[S_H] -= ez * T
+        s[S.H] -= ez * T
     sync_position(s, cfg, frame)
     return xn, xe, xd
 
@@ -841,13 +845,13 @@ def _first_mid_velocity(s: np.ndarray, cfg: np.ndarray, frame: int, T: float, sg
     a quarter Schuler period). Predicted v(1) with ``v_mid = v(0)``, then ``(v(0) + v(1))/2``.
     (The inertial frame has no Coriolis term; there v_mid only places gravitation.)"""
     literally(frame)
-    vx, vy, vz = s[S_V], s[S_V + 1], s[S_V + 2]
-    _l_cycle(s, cfg, frame, T, s[S_LATC], s[S_H], vx, vy, vz)
-    px, py, pz = _velocity_step(s, T, sgx, sgy, sgz, vsx, vsy, vsz, scx, scy, scz, (s[S_WIE] + s[S_WEN]) * T,
-                                (s[S_WIE + 1] + s[S_WEN + 1]) * T, (s[S_WIE + 2] + s[S_WEN + 2]) * T, 0.0, 0.0, 0.0,
+    vx, vy, vz = s[S.V], s[S.V + 1], s[S.V + 2]
+    _l_cycle(s, cfg, frame, T, s[S.LATC], s[S.H], vx, vy, vz)
+    px, py, pz = _velocity_step(s, T, sgx, sgy, sgz, vsx, vsy, vsz, scx, scy, scz, (s[S.WIE] + s[S.WEN]) * T,
+                                (s[S.WIE + 1] + s[S.WEN + 1]) * T, (s[S.WIE + 2] + s[S.WEN + 2]) * T, 0.0, 0.0, 0.0,
                                 vx, vy, vz)
     if cfg[CFG_VHOLD] > 0.5:
-        pz = s[S_VD0]
+        pz = s[S.VD0]
     return 0.5 * (vx + px), 0.5 * (vy + py), 0.5 * (vz + pz)
 
 
@@ -861,50 +865,50 @@ def k_update(s: np.ndarray, cfg: np.ndarray, frame: int) -> None:
     runs only its own branches.
     """
     literally(frame)
-    n = int(s[S_NJ])
-    T = s[S_BUFT]
+    n = int(s[S.NJ])
+    T = s[S.BUFT]
     inertial = frame == INERTIAL
-    if inertial and s[S_INI] < 0.5:
+    if inertial and s[S.INI] < 0.5:
         _enter_inertial(s)
     sgx, sgy, sgz, vsx, vsy, vsz, scx, scy, scz = _body_increments(s, cfg, n)
     # Mid-interval velocity extrapolated from the last two updates ([TW11] 11.4).
-    vmx = 1.5 * s[S_V] - 0.5 * s[S_VP]
-    vmy = 1.5 * s[S_V + 1] - 0.5 * s[S_VP + 1]
-    vmz = 1.5 * s[S_V + 2] - 0.5 * s[S_VP + 2]
+    vmx = 1.5 * s[S.V] - 0.5 * s[S.VP]
+    vmy = 1.5 * s[S.V + 1] - 0.5 * s[S.VP + 1]
+    vmz = 1.5 * s[S.V + 2] - 0.5 * s[S.VP + 2]
     # The frame rate the last update used (l-cycle values), for dzeta.
-    wpx, wpy, wpz = s[S_WIE] + s[S_WEN], s[S_WIE + 1] + s[S_WEN + 1], s[S_WIE + 2] + s[S_WEN + 2]
-    first = s[S_NK] < 0.5
+    wpx, wpy, wpz = s[S.WIE] + s[S.WEN], s[S.WIE + 1] + s[S.WEN + 1], s[S.WIE + 2] + s[S.WEN + 2]
+    first = s[S.NK] < 0.5
     if first and not inertial:
         vmx, vmy, vmz = _first_mid_velocity(s, cfg, frame, T, sgx, sgy, sgz, vsx, vsy, vsz, scx, scy, scz)
-    if int(s[S_NL]) % int(cfg[CFG_L_EVERY]) == 0:
-        _l_cycle(s, cfg, frame, T, s[S_LATC], s[S_H], vmx, vmy, vmz)
-    s[S_NL] += 1.0
-    wx, wy, wz = s[S_WIE] + s[S_WEN], s[S_WIE + 1] + s[S_WEN + 1], s[S_WIE + 2] + s[S_WEN + 2]
+    if int(s[S.NL]) % int(cfg[CFG_L_EVERY]) == 0:
+        _l_cycle(s, cfg, frame, T, s[S.LATC], s[S.H], vmx, vmy, vmz)
+    s[S.NL] += 1.0
+    wx, wy, wz = s[S.WIE] + s[S.WEN], s[S.WIE + 1] + s[S.WEN + 1], s[S.WIE + 2] + s[S.WEN + 2]
     zx, zy, zz = wx * T, wy * T, wz * T
     if first:
         wpx, wpy, wpz = wx, wy, wz
     vnx, vny, vnz = _velocity_step(s, T, sgx, sgy, sgz, vsx, vsy, vsz, scx, scy, scz, zx, zy, zz,
                                    (wx - wpx) * T, (wy - wpy) * T, (wz - wpz) * T, vmx, vmy, vmz)
     if inertial:
-        vnx += s[S_GH] * T
-        vny += s[S_GH + 1] * T
+        vnx += s[S.GH] * T
+        vny += s[S.GH + 1] * T
     elif cfg[CFG_VHOLD] > 0.5:
-        vnz = s[S_VD0]
-    s[S_T] = s[S_TJ]  # the position step's output (inertial: the Earth's angle) is at the new time
+        vnz = s[S.VD0]
+    s[S.T] = s[S.TJ]  # the position step's output (inertial: the Earth's angle) is at the new time
     xn, xe, xd = _position_step(s, cfg, frame, T, vnx, vny, vnz)
     # The attitude turns with the frame by what the position step turned C_n^e (xi, from the
     # same v_eff) plus the Earth's rotation, so attitude and position see one transport rate
     # (zeta's v_mid extrapolation would add T^3/2 w_en(v'') per update, a gyro-like drift).
-    _attitude_step(s, cfg, sgx, sgy, sgz, s[S_WIE] * T + xn, s[S_WIE + 1] * T + xe, s[S_WIE + 2] * T + xd)
+    _attitude_step(s, cfg, sgx, sgy, sgz, s[S.WIE] * T + xn, s[S.WIE + 1] * T + xe, s[S.WIE + 2] * T + xd)
     if inertial and cfg[CFG_VHOLD] > 0.5:
         vnx, vny, vnz = _inertial_hold(s, cfg, vnx, vny, vnz)
     for a in range(3):
-        s[S_VP + a] = s[S_V + a]
-    s[S_V], s[S_V + 1], s[S_V + 2] = vnx, vny, vnz
-    s[S_NK] += 1.0
-    s[S_NJ] = 0.0
-    s[S_BUFT] = 0.0
-    for i in range(S_CONE, S_ACCV + 3):
+        s[S.VP + a] = s[S.V + a]
+    s[S.V], s[S.V + 1], s[S.V + 2] = vnx, vny, vnz
+    s[S.NK] += 1.0
+    s[S.NJ] = 0.0
+    s[S.BUFT] = 0.0
+    for i in range(S.CONE, S.ACCV + 3):
         s[i] = 0.0
 
 
@@ -931,17 +935,17 @@ def _buffer(s: np.ndarray, cfg: np.ndarray, t: float, ax: float, ay: float, az: 
             bx: float, by: float, bz: float) -> int:
     """The j cycle of :func:`push_increment_s` without its k update: 1 when one is due, 0 when
     the sample was buffered, -1 when it was rejected."""
-    dt = t - s[S_TJ]
+    dt = t - s[S.TJ]
     if not dt > 0.0:
         return -1
-    j = int(s[S_NJ])
-    o = S_BTH + 3 * j
+    j = int(s[S.NJ])
+    o = S.BTH + 3 * j
     s[o], s[o + 1], s[o + 2] = ax, ay, az
-    o = S_BDV + 3 * j
+    o = S.BDV + 3 * j
     s[o], s[o + 1], s[o + 2] = bx, by, bz
-    s[S_NJ] = j + 1
-    s[S_BUFT] += dt
-    s[S_TJ] = t
+    s[S.NJ] = j + 1
+    s[S.BUFT] += dt
+    s[S.TJ] = t
     if j + 1 >= int(cfg[CFG_SAMPLES]):
         return 1
     return 0
@@ -969,45 +973,45 @@ def push_rate_scalars(
     hold back to the start (docs/conventions.md "Sensor data").
     """
     literally(frame)
-    t_last = s[S_TJ]
+    t_last = s[S.TJ]
     if cfg[CFG_SAMPLED] < 0.5:
         if not t > t_last:
             return -1
         dt = t - t_last
         return push_increment_s(s, cfg, t, wx * dt, wy * dt, wz * dt, fx * dt, fy * dt, fz * dt, frame)
-    if s[S_HAVEP] < 0.5:
+    if s[S.HAVEP] < 0.5:
         if t < t_last:
             return -1
-        s[S_PW], s[S_PW + 1], s[S_PW + 2] = wx, wy, wz
-        s[S_PFO], s[S_PFO + 1], s[S_PFO + 2] = fx, fy, fz
-        s[S_HAVEP] = 1.0
+        s[S.PW], s[S.PW + 1], s[S.PW + 2] = wx, wy, wz
+        s[S.PFO], s[S.PFO + 1], s[S.PFO + 2] = fx, fy, fz
+        s[S.HAVEP] = 1.0
         if t == t_last:
             return 0
     if not t > t_last:
         return -1
     h = t - t_last
-    w0x, w0y, w0z = s[S_PW], s[S_PW + 1], s[S_PW + 2]
-    f0x, f0y, f0z = s[S_PFO], s[S_PFO + 1], s[S_PFO + 2]
+    w0x, w0y, w0z = s[S.PW], s[S.PW + 1], s[S.PW + 2]
+    f0x, f0y, f0z = s[S.PFO], s[S.PFO + 1], s[S.PFO + 2]
     ax, ay, az = 0.5 * (w0x + wx) * h, 0.5 * (w0y + wy) * h, 0.5 * (w0z + wz) * h
     bx, by, bz = 0.5 * (f0x + fx) * h, 0.5 * (f0y + fy) * h, 0.5 * (f0z + fz) * h
-    aax, aay, aaz = s[S_ACCA], s[S_ACCA + 1], s[S_ACCA + 2]
-    avx, avy, avz = s[S_ACCV], s[S_ACCV + 1], s[S_ACCV + 2]
+    aax, aay, aaz = s[S.ACCA], s[S.ACCA + 1], s[S.ACCA + 2]
+    avx, avy, avz = s[S.ACCV], s[S.ACCV + 1], s[S.ACCV + 2]
     cx, cy, cz = rate_coning(w0x, w0y, w0z, wx, wy, wz, h)
-    s[S_CONE] += 0.5 * (aay * az - aaz * ay) + cx
-    s[S_CONE + 1] += 0.5 * (aaz * ax - aax * az) + cy
-    s[S_CONE + 2] += 0.5 * (aax * ay - aay * ax) + cz
+    s[S.CONE] += 0.5 * (aay * az - aaz * ay) + cx
+    s[S.CONE + 1] += 0.5 * (aaz * ax - aax * az) + cy
+    s[S.CONE + 2] += 0.5 * (aax * ay - aay * ax) + cz
     ux, uy, uz = rate_sculling(w0x, w0y, w0z, f0x, f0y, f0z, wx, wy, wz, fx, fy, fz, h)
-    s[S_SCUL] += 0.5 * ((aay * bz - aaz * by) + (avy * az - avz * ay)) + ux
-    s[S_SCUL + 1] += 0.5 * ((aaz * bx - aax * bz) + (avz * ax - avx * az)) + uy
-    s[S_SCUL + 2] += 0.5 * ((aax * by - aay * bx) + (avx * ay - avy * ax)) + uz
-    s[S_ACCA] += ax
-    s[S_ACCA + 1] += ay
-    s[S_ACCA + 2] += az
-    s[S_ACCV] += bx
-    s[S_ACCV + 1] += by
-    s[S_ACCV + 2] += bz
-    s[S_PW], s[S_PW + 1], s[S_PW + 2] = wx, wy, wz
-    s[S_PFO], s[S_PFO + 1], s[S_PFO + 2] = fx, fy, fz
+    s[S.SCUL] += 0.5 * ((aay * bz - aaz * by) + (avy * az - avz * ay)) + ux
+    s[S.SCUL + 1] += 0.5 * ((aaz * bx - aax * bz) + (avz * ax - avx * az)) + uy
+    s[S.SCUL + 2] += 0.5 * ((aax * by - aay * bx) + (avx * ay - avy * ax)) + uz
+    s[S.ACCA] += ax
+    s[S.ACCA + 1] += ay
+    s[S.ACCA + 2] += az
+    s[S.ACCV] += bx
+    s[S.ACCV + 1] += by
+    s[S.ACCV + 2] += bz
+    s[S.PW], s[S.PW + 1], s[S.PW + 2] = wx, wy, wz
+    s[S.PFO], s[S.PFO + 1], s[S.PFO + 2] = fx, fy, fz
     return push_increment_s(s, cfg, t, ax, ay, az, bx, by, bz, frame)
 
 
@@ -1055,7 +1059,7 @@ def _run_rates(s: np.ndarray, cfg: np.ndarray, t: np.ndarray, w: np.ndarray, f: 
     """:func:`run_rates` compiled for one frame."""
     literally(frame)
     m = 0
-    t0 = s[S_TJ]
+    t0 = s[S.TJ]
     for i in range(t.shape[0]):
         if t[i] < t0:
             continue

@@ -399,7 +399,7 @@ class Engine:
             inc[6] += dt
         if update and inc[6] > 0.0:
             X, P, _ = self._gsf  # type: ignore[misc]
-            c = self._s[sd.S_C:sd.S_C + 9]  # type: ignore[index]  # C_b^n row-major: roll, pitch from its last row
+            c = sd.body_to_nav(self._s)  # type: ignore[arg-type]  # C_b^n row-major: roll, pitch from its last row
             roll, pitch = math.atan2(c[7], c[8]), -math.asin(max(-1.0, min(1.0, c[6])))
             lat = math.radians(self._pos[0])  # type: ignore[index]
             yawgsf.predict(X, P, np.array(inc[0:3]), np.array(inc[3:6]), roll, pitch,
@@ -487,7 +487,7 @@ class Engine:
         (deg, deg, NED m/s, 1-sigma m and m/s) by kalman.yaw_reset; normal fusion resumes, ``source`` is the
         heading used, and the event says ``text`` and by how much the solution turned."""
         s = self._s
-        c = s[sd.S_C:sd.S_C + 9]  # type: ignore[index]
+        c = sd.body_to_nav(s)  # type: ignore[arg-type]
         dpsi = math.remainder(psi - math.atan2(c[3], c[0]), 2.0 * math.pi)
         kalman.yaw_reset(s, self._kcfg, self.filter.bias, self.filter.P, dpsi, var, math.radians(lat),
                          math.radians(lon), sigma_h * sigma_h, vn, ve, sigma_vel * sigma_vel)

@@ -100,7 +100,7 @@ def test_gnss_position_and_baro_by_hand() -> None:
                                rtol=1e-9, atol=0)
     np.testing.assert_allclose(log[1], [0.08, aided.K_BARO, 16 / 4, 1, 1, 2 / 5], rtol=1e-9, atol=0)
     np.testing.assert_allclose(st["P"][8, 8], 1.0, rtol=1e-15)
-    assert st["state"].shape == (sd.S_SIZE,) and st["state"][sd.S_T] == pytest.approx(0.1, abs=1e-15)
+    assert st["state"].shape == (sd.S_SIZE,) and st["state"][sd.S.T] == pytest.approx(0.1, abs=1e-15)
 
 
 def test_a_fix_between_updates_waits_for_the_next_and_a_rejection_is_counted() -> None:
@@ -288,8 +288,8 @@ def test_after_k_update_accumulates_and_decays() -> None:
     predict_every-th update."""
     cfg = sd.make_config(samples=1, earth_model="none")
     s = sd.init_state(0.0, 0.7, 0.1, 100.0, np.zeros(3), 0.0, 0.0, math.pi / 2)  # yaw 90 deg: C = Rz(90)
-    s[sd.S_T] = 0.25
-    s[sd.S_NK] = 3
+    s[sd.S.T] = 0.25
+    s[sd.S.NK] = 3
     spec = em.ImuSpec(gyro_gm=1.0, gyro_tau=0.5).as_array()
     P = np.eye(em.NX)
     bias = np.r_[np.arange(1.0, 14.0), np.zeros(kf.B_SIZE - 13)]
@@ -305,8 +305,8 @@ def test_after_k_update_accumulates_and_decays() -> None:
     e = math.exp(-0.2 / 0.5)
     np.testing.assert_allclose(bias, [1, 2, 3, 4, 5, 6, 7 * e, 8 * e, 9 * e, 10, 11, 12, 13] + [0] * (kf.B_SIZE - 13), rtol=1e-15)
     np.testing.assert_array_equal(P, np.eye(em.NX))  # 3 % 2: not propagated
-    s[sd.S_NK] = 4
-    s[sd.S_T] = 0.35
+    s[sd.S.NK] = 4
+    s[sd.S.T] = 0.35
     spec = em.ImuSpec(accel_gm=1e-9, accel_tau=0.25).as_array()  # a tiny part: its noise 8e-18 /s is negligible
     bias = np.r_[np.arange(1.0, 14.0), np.zeros(kf.B_SIZE - 13)]
     P = np.zeros((em.NX, em.NX))
@@ -342,7 +342,7 @@ def test_push_rate_aided_subtracts_the_bias_estimates() -> None:
     np.testing.assert_array_equal(sums, before[1])
     r = aided.push_rate_aided(s, cfg, spec, P, bias, acc, sums, 0.02, *w, *f, 1000, sd.GEOGRAPHIC)
     assert r == 1 and acc[12] == pytest.approx(0.02, rel=1e-12) and np.all(sums[0:6] == 0.0)
-    assert sums[6] == s[sd.S_T]
+    assert sums[6] == s[sd.S.T]
     # C f dt over the interval with C at its end: turned by the bias-corrected rate over 0.02 s (Rodrigues)
     th = 0.02 * np.array([0.5 - 0.011, -0.25 - 0.022, 0.125 - 0.033])
     k = np.array([[0.0, -th[2], th[1]], [th[2], 0.0, -th[0]], [-th[1], th[0], 0.0]])
@@ -462,9 +462,9 @@ def test_the_bias_estimates_are_subtracted_from_the_increments() -> None:
     w = -(bias[0:3] + bias[6:9])
     f = np.array([0.0, 0.0, -G_DATA]) - (bias[3:6] + bias[9:12])
     T = 0.1
-    np.testing.assert_allclose(s[sd.S_C : sd.S_C + 9], rodrigues(w * T).ravel(), rtol=0, atol=1e-13)
-    g0 = s[sd.S_G0]
-    np.testing.assert_allclose(s[sd.S_V : sd.S_V + 3], integral_exp(w, T) @ f + [0.0, 0.0, g0 * T], rtol=0,
+    np.testing.assert_allclose(s[sd.S.C : sd.S.C + 9], rodrigues(w * T).ravel(), rtol=0, atol=1e-13)
+    g0 = s[sd.S.G0]
+    np.testing.assert_allclose(s[sd.S.V : sd.S.V + 3], integral_exp(w, T) @ f + [0.0, 0.0, g0 * T], rtol=0,
                                atol=1e-12)
     assert len(out) == N_ROWS and counts.sum() == 0
 
@@ -539,7 +539,7 @@ def test_skip_rules_of_a_fresh_and_a_continued_run() -> None:
     # continued after exactly one update: rows at its time (0.01) are skipped, later ones used
     s = sd.init_state(0.0, lat, lon, H0, np.zeros(3), 0.0, 0.0, 0.0)
     s, P2, _, out, counts, log = run_direct(imu(1), P=P.copy(), s=s)
-    assert s[sd.S_NK] == 1.0
+    assert s[sd.S.NK] == 1.0
     kw = dict(gnss=[g_row(0.01), g_row(0.03)], baro=[b_row(0.01), b_row(0.03)], mag=[m_row(0.01), m_row(0.03)],
               static=[[0.005, 0.04, 0.005, 1.0]])
     s, P2, _, out, counts, log = run_direct(imu(5)[1:], P=P2, s=s, **kw)
@@ -656,7 +656,7 @@ def test_magnetometer_h_takes_the_inclination_of_the_samples_before(before: str)
     assert log[-1, 0] == 0.05 and log[-1, 4] == 1.0
     nis, x_n = mag_by_hand(([2.0, 0.5] if before == "accepted" else []) + [3.0], 0.01, 0.01, -0.1)
     assert log[-1, 2] == pytest.approx(nis, rel=1e-9)
-    cnb = s[sd.S_C : sd.S_C + 9].reshape(3, 3)
+    cnb = s[sd.S.C : sd.S.C + 9].reshape(3, 3)
     assert math.atan2(cnb[2, 1], cnb[2, 2]) == pytest.approx(-x_n, rel=1e-9)
 
 
@@ -743,11 +743,11 @@ def test_after_k_update_accumulates_over_several_updates() -> None:
     P = np.zeros((em.NX, em.NX))
     acc, sums = np.zeros(aided.ACC_SIZE), np.zeros(7)
     spec = em.ImuSpec().as_array()
-    s[sd.S_T], s[sd.S_NK] = 0.25, 1
+    s[sd.S.T], s[sd.S.NK] = 0.25, 1
     sums[:] = [0, 0, 0, 1.0, 2.0, 3.0, 0.0]
     aided.after_k_update(s, cfg, spec, P, np.zeros(kf.B_SIZE), acc, sums, 3, sd.GEOGRAPHIC)
-    s[sd.S_C : sd.S_C + 9] = [0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0]  # turned 90 deg
-    s[sd.S_T], s[sd.S_NK] = 0.75, 2
+    s[sd.S.C : sd.S.C + 9] = [0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0]  # turned 90 deg
+    s[sd.S.T], s[sd.S.NK] = 0.75, 2
     sums[0:6] = [0, 0, 0, 1.0, 2.0, 3.0]
     aided.after_k_update(s, cfg, spec, P, np.zeros(kf.B_SIZE), acc, sums, 3, sd.GEOGRAPHIC)
     np.testing.assert_allclose(acc[0:9], [0.25, -0.5, 0.0, 0.5, 0.25, 0.0, 0.0, 0.0, 0.75], atol=1e-15)
@@ -769,8 +769,8 @@ def test_push_rate_aided_velocity() -> None:
     assert r == 1
     w = w_raw - (bias[0:3] + bias[6:9])
     f = f_raw - (bias[3:6] + bias[9:12])
-    np.testing.assert_allclose(s[sd.S_C : sd.S_C + 9], rodrigues(w * 0.02).ravel(), rtol=0, atol=1e-12)
-    np.testing.assert_allclose(s[sd.S_V : sd.S_V + 3], integral_exp(w, 0.02) @ f + [0, 0, s[sd.S_G0] * 0.02],
+    np.testing.assert_allclose(s[sd.S.C : sd.S.C + 9], rodrigues(w * 0.02).ravel(), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(s[sd.S.V : sd.S.V + 3], integral_exp(w, 0.02) @ f + [0, 0, s[sd.S.G0] * 0.02],
                                rtol=0, atol=1e-9)
 
 

@@ -589,18 +589,18 @@ def test_joseph_update_equals_the_textbook_update() -> None:
 def inject(s: np.ndarray, cfg: np.ndarray, dx: np.ndarray) -> np.ndarray:
     """A copy of s carrying the error dx (phi, dv, dp) relative to s (estimate = s + error)."""
     out = s.copy()
-    c = rotvec_to_dcm(dx[0:3]) @ s[sd.S_C : sd.S_C + 9].reshape(3, 3)
-    out[sd.S_C : sd.S_C + 9] = c.ravel()
+    c = rotvec_to_dcm(dx[0:3]) @ s[sd.S.C : sd.S.C + 9].reshape(3, 3)
+    out[sd.S.C : sd.S.C + 9] = c.ravel()
     w = math.sqrt(max(1.0 + np.trace(c), 0.0)) / 2.0
-    out[sd.S_Q : sd.S_Q + 4] = [w, (c[2, 1] - c[1, 2]) / (4 * w), (c[0, 2] - c[2, 0]) / (4 * w),
+    out[sd.S.Q : sd.S.Q + 4] = [w, (c[2, 1] - c[1, 2]) / (4 * w), (c[0, 2] - c[2, 0]) / (4 * w),
                                 (c[1, 0] - c[0, 1]) / (4 * w)]
-    out[sd.S_V : sd.S_V + 3] += dx[3:6]
-    out[sd.S_VP : sd.S_VP + 3] += dx[3:6]
+    out[sd.S.V : sd.S.V + 3] += dx[3:6]
+    out[sd.S.VP : sd.S.VP + 3] += dx[3:6]
     lat, lon, h = for_frame(sd.position, sd.GEOGRAPHIC)(s, cfg)
     r_n, r_e = earth.radii(lat)
-    out[sd.S_CNE : sd.S_CNE + 9] = earth.cne_from_latlon(lat + dx[6] / (r_n + h),
+    out[sd.S.CNE : sd.S.CNE + 9] = earth.cne_from_latlon(lat + dx[6] / (r_n + h),
                                                           lon + dx[7] / ((r_e + h) * math.cos(lat))).ravel()
-    out[sd.S_H] = h - dx[8]
+    out[sd.S.H] = h - dx[8]
     for_frame(sd.sync_position, sd.GEOGRAPHIC)(out, cfg)
     return out
 
@@ -625,11 +625,11 @@ def test_feedback_removes_an_injected_error() -> None:
     x = dx.copy()
     kf.feedback(s, CFG, bias, x)
     assert np.all(x == 0.0)
-    np.testing.assert_allclose(s[sd.S_C : sd.S_C + 9], ref[sd.S_C : sd.S_C + 9], atol=1e-14)
-    np.testing.assert_allclose(s[sd.S_V : sd.S_V + 3], ref[sd.S_V : sd.S_V + 3], atol=1e-14)
-    np.testing.assert_allclose(s[sd.S_VP : sd.S_VP + 3], ref[sd.S_VP : sd.S_VP + 3], atol=1e-14)
-    np.testing.assert_allclose(quat_to_dcm(s[sd.S_Q : sd.S_Q + 4]).ravel(), s[sd.S_C : sd.S_C + 9], atol=1e-15)
-    assert abs(np.linalg.norm(s[sd.S_Q : sd.S_Q + 4]) - 1.0) < 1e-15
+    np.testing.assert_allclose(s[sd.S.C : sd.S.C + 9], ref[sd.S.C : sd.S.C + 9], atol=1e-14)
+    np.testing.assert_allclose(s[sd.S.V : sd.S.V + 3], ref[sd.S.V : sd.S.V + 3], atol=1e-14)
+    np.testing.assert_allclose(s[sd.S.VP : sd.S.VP + 3], ref[sd.S.VP : sd.S.VP + 3], atol=1e-14)
+    np.testing.assert_allclose(quat_to_dcm(s[sd.S.Q : sd.S.Q + 4]).ravel(), s[sd.S.C : sd.S.C + 9], atol=1e-15)
+    assert abs(np.linalg.norm(s[sd.S.Q : sd.S.Q + 4]) - 1.0) < 1e-15
     lat, lon, h = for_frame(sd.position, sd.GEOGRAPHIC)(s, CFG)
     lr, lo, hr = for_frame(sd.position, sd.GEOGRAPHIC)(ref, CFG)
     # the transport-rotation step and the lat/lon offsets differ at second order: dp^2 tan L / R ~ 3e-5 m
@@ -683,7 +683,7 @@ def test_measurement_models_linearise_the_measurement(which: str) -> None:
         tol = 1e-5
     elif which == "mag":
         m_n = 48.0 * np.array([math.cos(1.1) * math.cos(0.05), math.cos(1.1) * math.sin(0.05), math.sin(1.1)])
-        c_true = moving_state()[sd.S_C : sd.S_C + 9].reshape(3, 3)
+        c_true = moving_state()[sd.S.C : sd.S.C + 9].reshape(3, 3)
         m_b = c_true.T @ m_n
 
         def measure(s):
@@ -702,8 +702,8 @@ def test_measurement_models_linearise_the_measurement(which: str) -> None:
         tol = 7e-4  # as nhc's
         ref = moving_state()
         nu0, H, R = measure(ref)
-        c = ref[sd.S_C:sd.S_C + 9].reshape(3, 3)
-        np.testing.assert_allclose(nu0, c.T @ ref[sd.S_V:sd.S_V + 3] - v_b, rtol=0, atol=1e-14)
+        c = ref[sd.S.C:sd.S.C + 9].reshape(3, 3)
+        np.testing.assert_allclose(nu0, c.T @ ref[sd.S.V:sd.S.V + 3] - v_b, rtol=0, atol=1e-14)
         np.testing.assert_allclose(np.diag(R), [0.01, 0.04, 0.09], rtol=1e-15)
         np.testing.assert_array_equal(H[1:3], kf.nhc(ref, 0.1)[1])  # the constraint's rows are its y and z
     elif which == "wheel":
@@ -724,7 +724,7 @@ def test_measurement_models_linearise_the_measurement(which: str) -> None:
         b2[kf.B_WS] += 0.01
         np.testing.assert_allclose(measure(ref, w, b2)[0] - nu0, H[:, em.X_WS] * 0.01, rtol=1e-12)
         # the speed at the axle centre: C^T v along x plus (w x l)_x, times 1 + k, less the measured one
-        v_b = ref[sd.S_C:sd.S_C + 9].reshape(3, 3).T @ ref[sd.S_V:sd.S_V + 3]
+        v_b = ref[sd.S.C:sd.S.C + 9].reshape(3, 3).T @ ref[sd.S.V:sd.S.V + 3]
         assert nu0[0] == pytest.approx(1.02 * (v_b[0] + np.cross(w, lever)[0]) - 8.3, rel=1e-14)
     else:
         def measure(s):
@@ -775,7 +775,7 @@ def test_late_fix_moves_the_solution_back_along_the_velocity() -> None:
     lever = np.zeros(3)
     lat, lon, h = for_frame(sd.position, sd.GEOGRAPHIC)(s, CFG)
     nu_late, H, _ = kf.gnss_position(s, CFG, lat, lon, h, lever, 0.01, 1.0, 1.0)
-    np.testing.assert_allclose(nu_late, -0.01 * s[sd.S_V : sd.S_V + 3], atol=1e-9)
+    np.testing.assert_allclose(nu_late, -0.01 * s[sd.S.V : sd.S.V + 3], atol=1e-9)
     np.testing.assert_allclose(H[:, em.X_DV : em.X_DV + 3], -0.01 * np.eye(3))
 
 

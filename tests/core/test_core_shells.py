@@ -88,8 +88,8 @@ def test_initial_state_from_contract_units() -> None:
     """Degrees in, radians and the attitude's DCM in the state: yaw 90 deg, level, is x north -> east."""
     s = runner.initial_state({**INIT, "vn": 1, "ve": -2, "vd": 3})
     assert sd.state_time(s) == 2.0
-    np.testing.assert_array_equal(s[sd.S_V:sd.S_V + 3], [1.0, -2.0, 3.0])
-    c = s[sd.S_C:sd.S_C + 9].reshape(3, 3)
+    np.testing.assert_array_equal(s[sd.S.V:sd.S.V + 3], [1.0, -2.0, 3.0])
+    c = s[sd.S.C:sd.S.C + 9].reshape(3, 3)
     np.testing.assert_allclose(c, [[0, -1, 0], [1, 0, 0], [0, 0, 1]], atol=1e-15)
     lat, lon, h = sd.position(s, sd.make_config(), sd.GEOGRAPHIC)
     assert (lat, lon, h) == pytest.approx((math.radians(45.0), math.radians(7.0), 100.0), rel=1e-15, abs=0)

@@ -84,13 +84,13 @@ def perturbed_state(row: np.ndarray, dx: np.ndarray) -> np.ndarray:
 
 def state_error(sp: np.ndarray, sr: np.ndarray) -> np.ndarray:
     """(phi, dv, dp) of state sp against the reference sr."""
-    cp = sp[sd.S_C : sd.S_C + 9].reshape(3, 3)
-    cr = sr[sd.S_C : sd.S_C + 9].reshape(3, 3)
+    cp = sp[sd.S.C : sd.S.C + 9].reshape(3, 3)
+    cr = sr[sd.S.C : sd.S.C + 9].reshape(3, 3)
     lp, op, hp = for_frame(sd.position, sd.GEOGRAPHIC)(sp, CFG)
     lr, orr, hr = for_frame(sd.position, sd.GEOGRAPHIC)(sr, CFG)
     r_n, r_e = earth.radii(lr)
     dp = [(lp - lr) * (r_n + hr), (op - orr) * (r_e + hr) * math.cos(lr), -(hp - hr)]
-    return np.concatenate([dcm_to_rotvec(cp @ cr.T), sp[sd.S_V : sd.S_V + 3] - sr[sd.S_V : sd.S_V + 3], dp])
+    return np.concatenate([dcm_to_rotvec(cp @ cr.T), sp[sd.S.V : sd.S.V + 3] - sr[sd.S.V : sd.S.V + 3], dp])
 
 
 def run_strapdown(exact, j: int, n: int, dx: np.ndarray, transitions: list | None = None) -> np.ndarray:
@@ -104,23 +104,23 @@ def run_strapdown(exact, j: int, n: int, dx: np.ndarray, transitions: list | Non
     bg, ba = -dx[em.X_BG : em.X_BG + 3], -dx[em.X_BA : em.X_BA + 3]
     t_all = np.concatenate(([exact.t0], exact.t))
     dv_sum = np.zeros(3)
-    c_old = s[sd.S_C : sd.S_C + 9].reshape(3, 3).copy()
-    v_old = s[sd.S_V : sd.S_V + 3].copy()
-    t_old = s[sd.S_T]
+    c_old = s[sd.S.C : sd.S.C + 9].reshape(3, 3).copy()
+    v_old = s[sd.S.V : sd.S.V + 3].copy()
+    t_old = s[sd.S.T]
     for i in range(j, j + n):
         dt = t_all[i + 1] - t_all[i]
         dv = exact.dv[i] + ba * dt
         dv_sum += dv
         if for_frame(sd.push_increment, sd.GEOGRAPHIC)(s, CFG, exact.t[i], exact.dtheta[i] + bg * dt, dv) == 1:
             if transitions is not None:
-                c_new = s[sd.S_C : sd.S_C + 9].reshape(3, 3).copy()
-                v_new = s[sd.S_V : sd.S_V + 3].copy()
-                T = s[sd.S_T] - t_old
+                c_new = s[sd.S.C : sd.S.C + 9].reshape(3, 3).copy()
+                v_new = s[sd.S.V : sd.S.V + 3].copy()
+                T = s[sd.S.T] - t_old
                 c_mid = 0.5 * (c_old + c_new)
                 lat, _, h = for_frame(sd.position, sd.GEOGRAPHIC)(s, CFG)
                 F = em.system_matrix(c_mid, 0.5 * (v_old + v_new), lat, h, c_mid @ dv_sum / T, SPEC, True)
                 transitions.append(em.transition(F, T))
-                c_old, v_old, t_old = c_new, v_new, s[sd.S_T]
+                c_old, v_old, t_old = c_new, v_new, s[sd.S.T]
             dv_sum[:] = 0.0
     return s
 

@@ -548,8 +548,8 @@ V0 = np.array([12.0, -7.0, 1.5])
 def state(cfg=CFG) -> np.ndarray:
     s = sd.init_state(3.0, LAT, LON, H0, V0, *ATT)
     if cfg is CFG_LAB:
-        s[sd.S_PF : sd.S_PF + 3] = [40.0, -25.0, 6.0]
-    s[sd.S_VP : sd.S_VP + 3] = [11.0, -6.0, 1.0]  # the previous update's velocity
+        s[sd.S.PF : sd.S.PF + 3] = [40.0, -25.0, 6.0]
+    s[sd.S.VP : sd.S.VP + 3] = [11.0, -6.0, 1.0]  # the previous update's velocity
     return s
 
 
@@ -573,7 +573,7 @@ def test_yaw_reset_turns_the_heading_and_puts_position_and_velocity_on_the_fix()
     sd.solution_row(s, CFG, row, sd.GEOGRAPHIC)
     np.testing.assert_allclose(np.degrees(row[7:10]), [5.0, -8.0, -10.0], atol=1e-9)
     np.testing.assert_allclose(row[4:7], [3.0, -4.0, V0[2]], atol=1e-9)
-    np.testing.assert_allclose(s[sd.S_VP + 2], 1.0, atol=0)
+    np.testing.assert_allclose(s[sd.S.VP + 2], 1.0, atol=0)
     assert abs(row[1] - lat_fix) * r_n < 1e-6 and abs(row[2] - lon_fix) * r_e < 1e-6 and abs(row[3] - H0) < 1e-6
     reset = [em.X_PHI + 2, em.X_DP, em.X_DP + 1, em.X_DV, em.X_DV + 1]
     for j, var in zip(reset, (0.01, 4.0, 4.0, 0.09, 0.09)):
@@ -602,27 +602,27 @@ def test_feedback_corrects_attitude_velocity_position_and_biases() -> None:
     kf.feedback(s, CFG, bias, x)
     assert np.all(x == 0.0)
     c_exp = rodrigues(-phi) @ cbn(*ATT)
-    np.testing.assert_allclose(s[sd.S_C : sd.S_C + 9], c_exp.ravel(), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(s[sd.S.C : sd.S.C + 9], c_exp.ravel(), rtol=0, atol=1e-15)
     t = np.linalg.norm(phi)
     q_exp = hamilton(np.concatenate([[math.cos(t / 2)], -math.sin(t / 2) * phi / t]), quat_zyx(*ATT))
-    q_exp *= np.sign(q_exp @ s[sd.S_Q : sd.S_Q + 4])  # q and -q are the same attitude
-    np.testing.assert_allclose(s[sd.S_Q : sd.S_Q + 4], q_exp, rtol=0, atol=1e-15)
-    np.testing.assert_array_equal(s[sd.S_V : sd.S_V + 3], [11.5, -6.75, 1.375])
-    np.testing.assert_array_equal(s[sd.S_VP : sd.S_VP + 3], [10.5, -5.75, 0.875])
+    q_exp *= np.sign(q_exp @ s[sd.S.Q : sd.S.Q + 4])  # q and -q are the same attitude
+    np.testing.assert_allclose(s[sd.S.Q : sd.S.Q + 4], q_exp, rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(s[sd.S.V : sd.S.V + 3], [11.5, -6.75, 1.375])
+    np.testing.assert_array_equal(s[sd.S.VP : sd.S.VP + 3], [10.5, -5.75, 0.875])
     r_n, r_e = radii(LAT)
     xi = np.array([dp[1] / (r_e + H0), -dp[0] / (r_n + H0), -dp[1] * math.tan(LAT) / (r_e + H0)])
     cne_exp = cne(LAT, LON) @ rodrigues(-xi)  # the transport rotation of -dp: -xi of +dp
-    np.testing.assert_allclose(s[sd.S_CNE : sd.S_CNE + 9], cne_exp.ravel(), rtol=0, atol=2e-16)
-    assert s[sd.S_H] == H0 + 4.0
+    np.testing.assert_allclose(s[sd.S.CNE : sd.S.CNE + 9], cne_exp.ravel(), rtol=0, atol=2e-16)
+    assert s[sd.S.H] == H0 + 4.0
     # to first order the point moved by -dp (second order: (dp / R)^2 ~ 3e-11 rad)
     lat, lon, h = position(s, CFG)
     assert lat == pytest.approx(LAT - dp[0] / (r_n + H0), rel=0, abs=3e-11)
     assert lon == pytest.approx(LON - dp[1] / ((r_e + H0) * math.cos(LAT)), rel=0, abs=3e-11)
     lat_c = math.atan2(-cne_exp[2, 2], math.hypot(cne_exp[2, 0], cne_exp[2, 1]))
-    assert s[sd.S_LATC] == pytest.approx(lat_c, rel=0, abs=1e-15)  # kept beside C_n^e
-    assert s[sd.S_LONC] == pytest.approx(lon, rel=0, abs=1e-15) and s[sd.S_LATC] == lat
+    assert s[sd.S.LATC] == pytest.approx(lat_c, rel=0, abs=1e-15)  # kept beside C_n^e
+    assert s[sd.S.LONC] == pytest.approx(lon, rel=0, abs=1e-15) and s[sd.S.LATC] == lat
     np.testing.assert_array_equal(bias, 100.0 - np.arange(1.0, em.NX - em.X_BG + 1.0))
-    assert s[sd.S_T] == 3.0 and np.all(s[sd.S_PF : sd.S_PF + 3] == 0.0)
+    assert s[sd.S.T] == 3.0 and np.all(s[sd.S.PF : sd.S.PF + 3] == 0.0)
 
 
 def test_feedback_laboratory_mode() -> None:
@@ -636,34 +636,34 @@ def test_feedback_laboratory_mode() -> None:
     x[em.X_BARO] = 0.5
     bias = np.zeros(kf.B_SIZE)
     kf.feedback(s, CFG_LAB, bias, x)
-    np.testing.assert_array_equal(s[sd.S_PF : sd.S_PF + 3], [30.0, -21.0, 4.0])
-    assert s[sd.S_H] == H0 + 2.0
+    np.testing.assert_array_equal(s[sd.S.PF : sd.S.PF + 3], [30.0, -21.0, 4.0])
+    assert s[sd.S.H] == H0 + 2.0
     # nothing else but the attitude (rewritten from q: round-off) and the lat/lon kept beside the position
     same = np.ones(sd.S_SIZE, bool)
-    same[sd.S_PF : sd.S_PF + 3] = same[sd.S_H] = same[sd.S_LATC] = same[sd.S_LONC] = False
-    same[sd.S_Q : sd.S_Q + 4] = same[sd.S_C : sd.S_C + 9] = False
+    same[sd.S.PF : sd.S.PF + 3] = same[sd.S.H] = same[sd.S.LATC] = same[sd.S.LONC] = False
+    same[sd.S.Q : sd.S.Q + 4] = same[sd.S.C : sd.S.C + 9] = False
     np.testing.assert_array_equal(s[same], s0[same])
     np.testing.assert_array_equal(bias[0:3], [-1e-3, -2e-3, -3e-3])
     r_n, r_e = radii(LAT)
-    assert s[sd.S_LATC] == pytest.approx(LAT + 30.0 / (r_n + H0), rel=0, abs=1e-16)
-    assert s[sd.S_LONC] == pytest.approx(LON - 21.0 / ((r_e + H0) * math.cos(LAT)), rel=0, abs=1e-16)
+    assert s[sd.S.LATC] == pytest.approx(LAT + 30.0 / (r_n + H0), rel=0, abs=1e-16)
+    assert s[sd.S.LONC] == pytest.approx(LON - 21.0 / ((r_e + H0) * math.cos(LAT)), rel=0, abs=1e-16)
     assert bias[kf.B_BARO] == -0.5 and np.all(bias[3:12] == 0.0)
-    np.testing.assert_allclose(s[sd.S_C : sd.S_C + 9], cbn(*ATT).ravel(), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(s[sd.S.C : sd.S.C + 9], cbn(*ATT).ravel(), rtol=0, atol=1e-15)
 
 
 def test_feedback_renormalises_the_quaternion() -> None:
     """q is unit after feedback (it is renormalised), with C its DCM, even from a quaternion 2^-20 off unit."""
     s = state()
-    s[sd.S_Q : sd.S_Q + 4] *= 1.0 + 2.0**-20
+    s[sd.S.Q : sd.S.Q + 4] *= 1.0 + 2.0**-20
     x = np.zeros(em.NX)
     x[em.X_PHI + 2] = 0.001
     kf.feedback(s, CFG, np.zeros(kf.B_SIZE), x)
-    q = s[sd.S_Q : sd.S_Q + 4]
+    q = s[sd.S.Q : sd.S.Q + 4]
     assert abs(q @ q - 1.0) < 4.5e-16
     q_exp = hamilton([math.cos(0.0005), 0.0, 0.0, -math.sin(0.0005)], quat_zyx(*ATT))
     q_exp *= np.sign(q_exp @ q)  # q and -q are the same attitude
     np.testing.assert_allclose(q, q_exp, rtol=0, atol=1e-15)
-    np.testing.assert_allclose(s[sd.S_C : sd.S_C + 9], (rodrigues(np.array([0, 0, -0.001])) @ cbn(*ATT)).ravel(),
+    np.testing.assert_allclose(s[sd.S.C : sd.S.C + 9], (rodrigues(np.array([0, 0, -0.001])) @ cbn(*ATT)).ravel(),
                                rtol=0, atol=1e-15)
 
 
@@ -677,11 +677,11 @@ def test_apply_update_feeds_back_only_what_is_accepted() -> None:
     bias = np.zeros(kf.B_SIZE)
     nis, ratio, ok = kf.apply_update(s, CFG, bias, P, H, nu, R, 0.0, kf.ALL)
     assert ok
-    np.testing.assert_allclose(s[sd.S_V : sd.S_V + 3], V0 / 4.0, rtol=1e-15, atol=0)
+    np.testing.assert_allclose(s[sd.S.V : sd.S.V + 3], V0 / 4.0, rtol=1e-15, atol=0)
     np.testing.assert_array_equal(np.diag(P)[3:6], 0.75)
     assert nis == pytest.approx(V0 @ V0 / 4.0, rel=1e-15, abs=0) and ratio == pytest.approx(6.0, rel=1e-15, abs=0)
     s0, P0 = s.copy(), P.copy()
-    nis, ratio, ok = kf.apply_update(s, CFG, bias, P, H, s[sd.S_V : sd.S_V + 3] * 100.0, R, 5.0, kf.ALL)
+    nis, ratio, ok = kf.apply_update(s, CFG, bias, P, H, s[sd.S.V : sd.S.V + 3] * 100.0, R, 5.0, kf.ALL)
     assert not ok
     np.testing.assert_array_equal(s, s0)
     np.testing.assert_array_equal(P, P0)
@@ -698,15 +698,15 @@ def test_metres_per_radian() -> None:
     assert me == pytest.approx((r_e + H0) * math.cos(LAT), rel=1e-14, abs=0)
     # the solution 0.1 rad north of its start and 600 m higher: its own point, not the start's
     s = state()
-    s[sd.S_CNE : sd.S_CNE + 9] = cne(LAT + 0.1, LON).ravel()
-    s[sd.S_H] = H0 + 600.0
+    s[sd.S.CNE : sd.S.CNE + 9] = cne(LAT + 0.1, LON).ravel()
+    s[sd.S.H] = H0 + 600.0
     for_frame(sd.sync_position, sd.GEOGRAPHIC)(s, CFG)
     r_n2, r_e2 = radii(LAT + 0.1)
     mn, me = kf.metres_per_radian(s, CFG)
     assert mn == pytest.approx(r_n2 + H0 + 600.0, rel=1e-15, abs=0)
     assert me == pytest.approx((r_e2 + H0 + 600.0) * math.cos(LAT + 0.1), rel=1e-14, abs=0)
     s = state(CFG_LAB)
-    s[sd.S_H] = 9000.0  # not used in laboratory mode
+    s[sd.S.H] = 9000.0  # not used in laboratory mode
     mn, me = kf.metres_per_radian(s, CFG_LAB)
     assert mn == pytest.approx(r_n + H0, rel=1e-15, abs=0)
     assert me == pytest.approx((r_e + H0) * math.cos(LAT), rel=1e-15, abs=0)
@@ -1049,7 +1049,7 @@ def test_wheel_speed_by_hand() -> None:
     phi (c_0 x v = 0 along the track), (l x db)_x on both gyro-bias parts (-1.02 l_z on y, 1.02 l_y on z), u
     on the scale factor."""
     s = sd.init_state(0.0, 0.8, 0.1, 100.0, np.array([0.0, 10.0, 0.0]), 0.0, 0.0, math.pi / 2)
-    s[sd.S_VP:sd.S_VP + 3] = [0.0, 9.8, 0.0]
+    s[sd.S.VP:sd.S.VP + 3] = [0.0, 9.8, 0.0]
     bias = np.zeros(kf.B_SIZE)
     bias[kf.B_WS] = 0.02
     nu, H, R = kf.wheel_speed(s, bias, 10.0, np.array([0.0, 0.0, 0.2]), np.array([-1.0, 0.5, 0.3]), 0.01, 0.02,
@@ -1073,7 +1073,7 @@ def body_state() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     att = [math.radians(x) for x in (15.0, -10.0, 120.0)]
     v, v_prev = np.array([8.0, -3.0, 0.5]), np.array([7.6, -2.8, 0.3])
     s = sd.init_state(0.0, 0.8, 0.1, 100.0, v, *att)
-    s[sd.S_VP:sd.S_VP + 3] = v_prev
+    s[sd.S.VP:sd.S.VP + 3] = v_prev
     return s, cbn(*att), v, v_prev
 
 

@@ -231,7 +231,7 @@ def test_the_placed_frames_covariance_matches_a_monte_carlo() -> None:
         lat, lon, h = sd.position(st, cfg, sd.GEOGRAPHIC)
         r_n, r_e = radii(lat)
         p_true = np.array([(lat - REF[0]) * (r_n + h), (lon - REF[1]) * (r_e + h) * math.cos(lat), REF[2] - h])
-        c_true = st[sd.S_C:sd.S_C + 9].reshape(3, 3)
+        c_true = st[sd.S.C:sd.S.C + 9].reshape(3, 3)
         n_b = rng.normal(0.0, sig_a)
         noisy = c_true @ (np.eye(3) + np.array([[0, -n_b[2], n_b[1]], [n_b[2], 0, -n_b[0]], [-n_b[1], n_b[0], 0]]))
         u, _, vt = np.linalg.svd(noisy)

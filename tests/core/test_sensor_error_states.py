@@ -80,7 +80,7 @@ def test_an_unestimated_gyro_scale_error_turns_the_heading_as_the_model_says() -
         for k in range(1, 101):
             aided.push_rate_aided(st, CFG_LAB, spec, P, bias, acc, sums, k / rate, 0.0, 0.0, (1.0 + scale) * w,
                                   0.0, 0.0, -9.80665, 1, sd.GEOGRAPHIC)
-        c = st[sd.S_C:sd.S_C + 9].reshape(3, 3)
+        c = st[sd.S.C:sd.S.C + 9].reshape(3, 3)
         return math.atan2(c[1, 0], c[0, 0]), P
 
     turned, _ = turn(0.0)  # w times the time the solution integrated
@@ -106,7 +106,7 @@ def test_the_hard_iron_column_is_the_derivative_of_the_heading() -> None:
     innovation moves by H_mb eps (central difference, error O(eps^2 / B_h^2) ~ 1e-9 relative); and a
     sample carrying hard iron h, corrected by an estimate of h, gives the innovation of a clean sample."""
     s = sd.init_state(0.0, 0.0, 0.0, 0.0, np.zeros(3), 7.0 * DEG, -4.0 * DEG, 200.0 * DEG)
-    c = s[sd.S_C:sd.S_C + 9].reshape(3, 3)
+    c = s[sd.S.C:sd.S.C + 9].reshape(3, 3)
     inc, dec = 60.0 * DEG, 10.0 * DEG
     m_n = 48.0 * np.array([math.cos(inc) * math.cos(dec), math.cos(inc) * math.sin(dec), math.sin(inc)])
     horiz = 48.0 * math.cos(inc)
@@ -147,7 +147,7 @@ def test_apply_mag_leaves_the_filter_alone_on_a_disturbed_sample() -> None:
     """aided.apply_mag: a sample 30 deg off the model's inclination returns -1 and changes neither the
     solution, P, the estimates nor the running statistics; a good one is applied (1) and counted into them."""
     s = sd.init_state(0.0, 0.8, 0.1, 100.0, np.zeros(3), 0.0, 0.0, 0.5)
-    c = s[sd.S_C:sd.S_C + 9].reshape(3, 3)
+    c = s[sd.S.C:sd.S.C + 9].reshape(3, 3)
     inc, dec = 60.0 * DEG, 0.05
     m_n = np.array([math.cos(inc) * math.cos(dec), math.cos(inc) * math.sin(dec), math.sin(inc)]) * 0.5
     P = np.eye(em.NX) * 1e-4
@@ -199,7 +199,7 @@ def _mag_setup(inc_deg: float = 60.0, strength: float = 0.5, off_deg: float = 0.
     variance (1-sigma 0.01, 0.05, 0.02 per axis, correlated with the heading), and a sample of the field of
     inclination ``inc_deg`` and ``strength``, ``off_deg`` east of D = 0.05 rad."""
     s = sd.init_state(0.0, 0.8, 0.1, 100.0, np.zeros(3), 0.0, 0.0, 0.5)
-    c = s[sd.S_C:sd.S_C + 9].reshape(3, 3)
+    c = s[sd.S.C:sd.S.C + 9].reshape(3, 3)
     inc, az = math.radians(inc_deg), 0.05 + math.radians(off_deg)
     m_n = strength * np.array([math.cos(inc) * math.cos(az), math.cos(inc) * math.sin(az), math.sin(inc)])
     P = np.diag([1e-6, 1e-6, 1e-3] + [1e-4] * (em.NX - 3))
@@ -404,9 +404,9 @@ def test_an_unestimated_misalignment_tilts_a_turn_as_the_model_says() -> None:
             r = aided.push_rate_aided(st, CFG_LAB, spec, P, bias, acc, sums, k / rate, mis * w, 0.0, w,
                                       0.0, 0.0, -9.80665, 1, sd.GEOGRAPHIC)
             if r == 1:
-                c = st[sd.S_C:sd.S_C + 9].reshape(3, 3)
+                c = st[sd.S.C:sd.S.C + 9].reshape(3, 3)
                 yaws.append(math.atan2(c[1, 0], c[0, 0]))
-        return st[sd.S_C:sd.S_C + 9].reshape(3, 3).copy(), P, yaws
+        return st[sd.S.C:sd.S.C + 9].reshape(3, 3).copy(), P, yaws
 
     c0, P, yaws = turn(0.0)
     T = n / rate  # the solution starts at t = 0, the first sample's interval included

@@ -197,7 +197,7 @@ def test_nominal_difference_inverts_feedback() -> None:
 
 
 def test_nominal_difference_in_the_laboratory_is_the_displacement() -> None:
-    """earth = none: position errors are the local displacement exactly (feedback moves S_PF by -dp)."""
+    """earth = none: position errors are the local displacement exactly (feedback moves S.PF by -dp)."""
     cfg = sd.make_config(samples=2, earth_model="none")
     s_a, b = moving_state(), np.zeros(kalman.B_SIZE)
     s_b, x = s_a.copy(), an_error()

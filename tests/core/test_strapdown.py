@@ -221,10 +221,10 @@ def turn_azimuth(s, alpha, lat, c, v):
     if not alpha:
         return
     rz = np.array([[math.cos(alpha), -math.sin(alpha), 0.0], [math.sin(alpha), math.cos(alpha), 0.0], [0, 0, 1.0]])
-    s[sd.S_CNE:sd.S_CNE + 9] = (cne(lat, LON0) @ rz).ravel()
-    s[sd.S_C:sd.S_C + 9] = (rz.T @ c).ravel()
-    s[sd.S_Q:sd.S_Q + 4] = qmul([math.cos(alpha / 2), 0.0, 0.0, -math.sin(alpha / 2)], s[sd.S_Q:sd.S_Q + 4])
-    s[sd.S_V:sd.S_V + 3] = s[sd.S_VP:sd.S_VP + 3] = rz.T @ np.asarray(v, float)
+    s[sd.S.CNE:sd.S.CNE + 9] = (cne(lat, LON0) @ rz).ravel()
+    s[sd.S.C:sd.S.C + 9] = (rz.T @ c).ravel()
+    s[sd.S.Q:sd.S.Q + 4] = qmul([math.cos(alpha / 2), 0.0, 0.0, -math.sin(alpha / 2)], s[sd.S.Q:sd.S.Q + 4])
+    s[sd.S.V:sd.S.V + 3] = s[sd.S.VP:sd.S.VP + 3] = rz.T @ np.asarray(v, float)
 
 
 def kinematics(lat, lon, h, v, t, steps=16):
@@ -290,7 +290,7 @@ def test_azimuth_of_the_wander_and_free_frames():
     ([ZS] 2.2, 2.3). alpha from C_w^e = C_n^e Rz(alpha), third row (cos L cos alpha, -cos L sin alpha, -sin L)."""
     for frame, rate in (("wander", 0.0), ("free", OMEGA * math.sin(LAT0))):
         rows, _, s = steady_run(frame, LAT0, 0.0, state=True)
-        c = s[sd.S_CNE:sd.S_CNE + 9]
+        c = s[sd.S.CNE:sd.S.CNE + 9]
         alpha = math.atan2(-c[7], c[6])
         assert alpha == pytest.approx(rate * 24 * DT, rel=1e-9, abs=1e-17)
 
@@ -308,9 +308,9 @@ def test_position_rotation(xi):
     series limit |xi| = 0.01 rad."""
     s = sd.init_state(0.0, LAT0, LON0, H0, np.zeros(3), 0.0, 0.0, 0.0)
     c0 = cne(LAT0, LON0)
-    s[sd.S_CNE:sd.S_CNE + 9] = c0.ravel()
+    s[sd.S.CNE:sd.S.CNE + 9] = c0.ravel()
     sd._rotate_position(s, *xi)
-    np.testing.assert_allclose(s[sd.S_CNE:sd.S_CNE + 9], (c0 @ expm(xi)).ravel(), rtol=0, atol=4e-16)
+    np.testing.assert_allclose(s[sd.S.CNE:sd.S.CNE + 9], (c0 @ expm(xi)).ravel(), rtol=0, atol=4e-16)
 
 
 def test_wander_frame_exactly_at_a_pole():
@@ -319,7 +319,7 @@ def test_wander_frame_exactly_at_a_pole():
     lon = 0.7
     cfg = sd.make_config(frame="wander")
     s = sd.init_state(0.0, LAT0, LON0, H0, np.array([1.0, 2.0, 0.5]), *ATT)
-    s[sd.S_CNE:sd.S_CNE + 9] = [-math.cos(lon), -math.sin(lon), 0.0, -math.sin(lon), math.cos(lon), 0.0, 0.0, 0.0,
+    s[sd.S.CNE:sd.S.CNE + 9] = [-math.cos(lon), -math.sin(lon), 0.0, -math.sin(lon), math.cos(lon), 0.0, 0.0, 0.0,
                                 -1.0]  # cne(90 deg, lon) with cos L exactly 0
     assert for_frame(sd.position, sd.WANDER)(s, cfg) == (math.pi / 2, pytest.approx(lon, abs=1e-16), H0)
     row = np.empty(14)
@@ -371,7 +371,7 @@ def test_inertial_gravitation(m):
         want = eci(ls[-1])
         if len(ls) >= 3:
             want = want + (eci(ls[-1]) - 2 * eci(ls[-2]) + eci(ls[-3])) / (24 * m * m)
-        got = np.array([s[sd.S_GH], s[sd.S_GH + 1], s[sd.S_G]])
+        got = np.array([s[sd.S.GH], s[sd.S.GH + 1], s[sd.S.G]])
         # The first update has no v(k-2): its point r + T/2 v lies on the chord, r Omega^2 T^2/8 = 1.0e-6 m above the
         # circle, 2 gamma/a of that = 3.2e-12 m/s^2 in G, which reaches the third l cycle's term divided by 24 M^2.
         # With M = 2 the held G misses Omega |G_h| T^2 = 1.2e-7 m/s over each pair of updates, which moves r^i by
@@ -569,7 +569,7 @@ def test_one_update_truncated_orders(order, attitude):
         check_row(row, 2 * DT, *pos, v1, c1, pos=1e-16, hm=1e-12, vel=1e-15, att=1e-15)
     else:  # C is not a rotation: compare it in the state, and what the row reports of it
         np.testing.assert_allclose(row[1:7], [*pos, *v1], rtol=0, atol=1e-15)
-        np.testing.assert_allclose(st[sd.S_C:sd.S_C + 9], c1.ravel(), rtol=0, atol=1e-15)
+        np.testing.assert_allclose(st[sd.S.C:sd.S.C + 9], c1.ravel(), rtol=0, atol=1e-15)
         assert row[7] == pytest.approx(math.atan2(c1[2, 1], c1[2, 2]), abs=1e-15)
         assert row[9] == pytest.approx(math.atan2(c1[1, 0], c1[0, 0]), abs=1e-15)
 
@@ -608,7 +608,7 @@ def test_rotation_about_one_axis(step, order, attitude):
             assert row[10] >= 0.0
             np.testing.assert_allclose(row[10:14], q, rtol=0, atol=4e-15 * k)
         else:
-            cst = s[sd.S_C:sd.S_C + 9] if k == n else None
+            cst = s[sd.S.C:sd.S.C + 9] if k == n else None
             if cst is not None:
                 want = r ** k * np.array([1.0 / r ** k, 0, 0, 0, math.cos(ang), -math.sin(ang), 0, math.sin(ang),
                                           math.cos(ang)])
@@ -630,7 +630,7 @@ def test_dcm_reorthonormalisation_schedule(every):
         c = c @ body
         if k % every == 0:
             c = c - 0.5 * (c @ c.T - np.eye(3)) @ c
-        np.testing.assert_allclose(s[sd.S_C:sd.S_C + 9], c.ravel(), rtol=0, atol=1e-15)
+        np.testing.assert_allclose(s[sd.S.C:sd.S.C + 9], c.ravel(), rtol=0, atol=1e-15)
 
 
 # --- rates: averaged and sampled ----------------------------------------------------------------
@@ -714,6 +714,18 @@ def test_sampled_rates_two_updates(samples):
         p = p + (v + v1) / 2 * T
         c, v = c @ expm(sigma), v1
         check_row(rows[k], (k + 1) * T, *lab_position(*p), v, c, pos=1e-16, hm=1e-12, vel=4e-15, att=2e-15)
+
+
+def test_body_to_nav_is_the_states_attitude_live():
+    """strapdown.body_to_nav: the state's C_b^n row-major, the Euler product of its initial angles, and a view:
+    what an update writes, the engine's next read sees."""
+    s = sd.init_state(0.0, LAT0, LON0, H0, np.zeros(3), 0.3, -0.2, 1.1)
+    c = sd.body_to_nav(s)
+    np.testing.assert_allclose(c.reshape(3, 3), cbn(0.3, -0.2, 1.1), rtol=0, atol=4e-16)
+    cfg = sd.make_config(samples=1)
+    push = for_frame(sd.push_increment, sd.GEOGRAPHIC)
+    push(s, cfg, 0.01, np.array([0.0, 0.0, 0.05]), np.zeros(3))  # turned 0.05 rad about body z
+    assert c[0] == sd.body_to_nav(s)[0] and abs(math.atan2(c[3], c[0]) - 1.1) > 0.04
 
 
 # --- the j cycle: return codes, clocks -------------------------------------------------------------
@@ -849,7 +861,7 @@ def test_velocity_step():
     drops the third-order 1/72 zeta x (dzeta x u), which bounds the difference."""
     s = sd.init_state(0.0, LAT0, LON0, H0, np.array([12.0, -7.0, 1.5]), *ATT)
     w_ie, w_en, g = np.array([3e-4, -1e-4, -2e-4]), np.array([1e-4, 2e-4, -3e-4]), 9.81
-    s[sd.S_WIE:sd.S_WIE + 3], s[sd.S_WEN:sd.S_WEN + 3], s[sd.S_G] = w_ie, w_en, g
+    s[sd.S.WIE:sd.S.WIE + 3], s[sd.S.WEN:sd.S.WEN + 3], s[sd.S.G] = w_ie, w_en, g
     T = 0.25
     sigma, dv, scul = np.array([0.02, -0.01, 0.03]), np.array([0.4, -0.3, -2.4]), np.array([1e-3, -2e-3, 5e-4])
     zeta, dzeta, vm = np.array([2e-3, -1e-3, 1.5e-3]), np.array([1e-5, 2e-5, -1e-5]), np.array([13.0, -6.0, 1.0])
@@ -867,18 +879,18 @@ def test_init_state_slots():
     there (Somigliana) and 1/(R_N + h), which places the first update's mid-interval latitude."""
     v = np.array([3.0, -4.0, 0.5])
     s = sd.init_state(2.5, LAT0, LON0, H0, v, *ATT)
-    assert s.shape == (131,) and s[sd.S_T] == 2.5 and s[sd.S_TJ] == 2.5
+    assert s.shape == (131,) and s[sd.S.T] == 2.5 and s[sd.S.TJ] == 2.5
     c = cbn(*ATT)
-    np.testing.assert_allclose(s[sd.S_C:sd.S_C + 9], c.ravel(), rtol=0, atol=4e-16)
-    np.testing.assert_allclose(dcm_of_quat(s[sd.S_Q:sd.S_Q + 4]), c, rtol=0, atol=1e-15)
-    assert s[sd.S_Q] > 0.0
-    assert list(s[sd.S_V:sd.S_V + 3]) == list(v) and list(s[sd.S_VP:sd.S_VP + 3]) == list(v)
-    np.testing.assert_allclose(s[sd.S_CNE:sd.S_CNE + 9], cne(LAT0, LON0).ravel(), rtol=0, atol=2e-16)
-    assert (s[sd.S_H], s[sd.S_LAT0], s[sd.S_LON0], s[sd.S_H0], s[sd.S_VD0]) == (H0, LAT0, LON0, H0, 0.5)
-    assert (s[sd.S_LATC], s[sd.S_LONC]) == (LAT0, LON0)
-    assert s[sd.S_G0] == pytest.approx(float(gamma(LAT0, H0)), rel=4e-16, abs=0)
-    assert s[sd.S_KN] == pytest.approx(1.0 / (radii(LAT0)[0] + H0), rel=4e-16, abs=0)
-    assert s[sd.S_NK] == 0.0 and s[sd.S_NJ] == 0.0 and s[sd.S_NL] == 0.0 and s[sd.S_INI] == 0.0
+    np.testing.assert_allclose(s[sd.S.C:sd.S.C + 9], c.ravel(), rtol=0, atol=4e-16)
+    np.testing.assert_allclose(dcm_of_quat(s[sd.S.Q:sd.S.Q + 4]), c, rtol=0, atol=1e-15)
+    assert s[sd.S.Q] > 0.0
+    assert list(s[sd.S.V:sd.S.V + 3]) == list(v) and list(s[sd.S.VP:sd.S.VP + 3]) == list(v)
+    np.testing.assert_allclose(s[sd.S.CNE:sd.S.CNE + 9], cne(LAT0, LON0).ravel(), rtol=0, atol=2e-16)
+    assert (s[sd.S.H], s[sd.S.LAT0], s[sd.S.LON0], s[sd.S.H0], s[sd.S.VD0]) == (H0, LAT0, LON0, H0, 0.5)
+    assert (s[sd.S.LATC], s[sd.S.LONC]) == (LAT0, LON0)
+    assert s[sd.S.G0] == pytest.approx(float(gamma(LAT0, H0)), rel=4e-16, abs=0)
+    assert s[sd.S.KN] == pytest.approx(1.0 / (radii(LAT0)[0] + H0), rel=4e-16, abs=0)
+    assert s[sd.S.NK] == 0.0 and s[sd.S.NJ] == 0.0 and s[sd.S.NL] == 0.0 and s[sd.S.INI] == 0.0
 
 
 @pytest.mark.parametrize("frame,l_every", [("geographic", 1), ("geographic", 2), ("geographic", 3), ("wander", 1),
@@ -1006,10 +1018,10 @@ def test_wander_l_cycle_point(frame):
     lm = LAT0 + DT * v[0] / (r_n + H0)  # T/2 = DT
     am = OMEGA * math.sin(LAT0) * DT if frame == "free" else 0.0  # the free azimuth turns at Omega sin L
     second = (DT * math.hypot(v[0] / (r_n + H0), am / DT)) ** 2 / 2  # |r + T/2 r x rho| - 1
-    np.testing.assert_allclose(s[sd.S_WIE:sd.S_WIE + 3],
+    np.testing.assert_allclose(s[sd.S.WIE:sd.S.WIE + 3],
                                OMEGA * np.array([math.cos(lm) * math.cos(am), -math.cos(lm) * math.sin(am),
                                                  -math.sin(lm)]), rtol=0, atol=OMEGA * (second + 4e-15))
-    assert s[sd.S_G] == pytest.approx(float(gamma(lm, H0)), rel=1e-14, abs=0)
+    assert s[sd.S.G] == pytest.approx(float(gamma(lm, H0)), rel=1e-14, abs=0)
 
 
 def test_inertial_gravitation_second_difference():
@@ -1020,30 +1032,32 @@ def test_inertial_gravitation_second_difference():
     T = 0.02
     cfg = sd.make_config(frame="inertial")
     s = sd.init_state(0.0, LAT0, LON0, H0, np.zeros(3), 0.0, 0.0, 0.0)
-    s[sd.S_T], s[sd.S_T0] = -T / 2, 0.0  # mid-interval time = t0: ECI = ECEF
+    s[sd.S.T], s[sd.S.T0] = -T / 2, 0.0  # mid-interval time = t0: ECI = ECEF
     r_e = radii(LAT0)[1]
     sl, cl, so, co = math.sin(LAT0), math.cos(LAT0), math.sin(LON0), math.cos(LON0)
     gs = []
     for h in (0.0, 100.0, 400.0):
         x, y = (r_e + h) * cl * co, (r_e + h) * cl * so
-        s[sd.S_RI:sd.S_RI + 3] = x, y, (r_e * (1 - E2) + h) * sl
+        s[sd.S.RI:sd.S.RI + 3] = x, y, (r_e * (1 - E2) + h) * sl
         sd._l_cycle_inertial(s, cfg, T, 0.0, 0.0, 0.0)
         g = float(gamma(LAT0, h))
         gs.append(np.array([-g * cl * co - OMEGA ** 2 * x, -g * cl * so - OMEGA ** 2 * y, -g * sl]))
     want = gs[2] + (gs[2] - 2 * gs[1] + gs[0]) / 24
     # the geodetic round trip of r to an ulp of |r| (1e-9 m) moves G by 2 gamma/a of it: 3e-15 m/s^2
-    np.testing.assert_allclose([s[sd.S_GH], s[sd.S_GH + 1], s[sd.S_G]], want, rtol=0, atol=2e-14)
+    np.testing.assert_allclose([s[sd.S.GH], s[sd.S.GH + 1], s[sd.S.G]], want, rtol=0, atol=2e-14)
 
 
 def test_the_state_layout_is_declared_once() -> None:
-    """strapdown.STATE_LAYOUT is the one declaration of the state vector: each S_<NAME> is its slot's running
-    offset, the slots tile 0 .. S_SIZE without gap or overlap, and the sizes are those of what they hold
-    (a quaternion 4, a DCM 9, six 3-vectors of increments 18, the 2 x 2 transport-rate matrix 4)."""
+    """strapdown.STATE_LAYOUT is the one declaration of the state vector: ``S.<NAME>`` is its slot's running
+    offset, in the declaration's order, the slots tile 0 .. S_SIZE without gap or overlap, and the sizes are
+    those of what they hold (a quaternion 4, a DCM 9, six 3-vectors of increments 18, the 2 x 2
+    transport-rate matrix 4). No index is typed anywhere else: the module holds no other S_<NAME>."""
     names = [f.name for f in sd.STATE_LAYOUT]
     assert len(set(names)) == len(names)
+    assert list(sd.S._fields) == names
     at = 0
     for f in sd.STATE_LAYOUT:
-        assert getattr(sd, f"S_{f.name}") == sd.S_OFFSET[f.name] == at, f.name
+        assert getattr(sd.S, f.name) == at, f.name
         at += f.size
     assert at == sd.S_SIZE == 131
     size = {f.name: f.size for f in sd.STATE_LAYOUT}
@@ -1051,5 +1065,15 @@ def test_the_state_layout_is_declared_once() -> None:
                                                                                                      4, 2)
     assert all(size[n] == 3 for n in ("V", "VP", "PF", "WIE", "WEN", "CONE", "SCUL", "ACCA", "ACCV", "PW", "PFO",
                                       "RI", "GP", "GPP"))
-    exported = sorted(k for k in vars(sd) if k.startswith("S_") and k not in ("S_SIZE", "S_OFFSET"))
-    assert exported == sorted(f"S_{n}" for n in names)  # no offset typed outside the declaration
+    assert sorted(k for k in vars(sd) if k.startswith("S_")) == ["S_SIZE"]
+
+
+def test_a_kernel_reads_the_state_by_the_named_index() -> None:
+    """A kernel compiled with ``S.<NAME>`` reads the slot the declaration gives it: init_state's values land
+    at the offsets counted from STATE_LAYOUT by hand here (t at 0, q_nb after it, C_b^n after q, v^n after C)."""
+    v = np.array([1.0, -2.0, 0.5])
+    s = sd.init_state(3.0, 0.7, 0.2, 100.0, v, 0.0, 0.0, 0.0)
+    assert s[0] == 3.0  # T
+    np.testing.assert_array_equal(s[1:5], [1.0, 0.0, 0.0, 0.0])  # Q: the identity rotation
+    np.testing.assert_array_equal(s[5:14], np.eye(3).ravel())  # C
+    np.testing.assert_array_equal(s[14:17], v)  # V

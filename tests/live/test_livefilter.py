@@ -69,15 +69,15 @@ def fix(n=0.0, e=0.0, d=0.0) -> tuple[float, float, float]:
 
 def offset(s) -> np.ndarray:
     """The solution's NED offset from the start (m): the flat position of the laboratory mode."""
-    return s[sd.S_PF:sd.S_PF + 3].copy()
+    return s[sd.S.PF:sd.S.PF + 3].copy()
 
 
 def velocity(s) -> np.ndarray:
-    return s[sd.S_V:sd.S_V + 3].copy()
+    return s[sd.S.V:sd.S.V + 3].copy()
 
 
 def yaw(s) -> float:
-    return math.atan2(s[sd.S_C + 3], s[sd.S_C])
+    return math.atan2(s[sd.S.C + 3], s[sd.S.C])
 
 
 def pos_var(var):
@@ -355,7 +355,7 @@ def test_push_feeds_each_axis_of_the_sample() -> None:
     t = np.linalg.norm(r)
     k = np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
     c = np.eye(3) + math.sin(t) / t * k + (1.0 - math.cos(t)) / t**2 * (k @ k)
-    np.testing.assert_allclose(s[sd.S_C:sd.S_C + 9].reshape(3, 3), c, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(s[sd.S.C:sd.S.C + 9].reshape(3, 3), c, rtol=0, atol=1e-15)
     s = state()
     f = live(s)
     assert f.push(s, CFG, T0 + 0.01, (0.0, 0.0, 0.0), (0.5, -0.25, -G + 0.125)) == 1
@@ -373,11 +373,11 @@ def test_push_moves_the_position_in_the_geographic_frame(started) -> None:
     if started:
         f.start(s, cfg, np.zeros(3), 0.01)
     assert f.push(s, cfg, T0 + 0.01, (0.0, 0.0, 0.0), (0.0, 0.0, -G)) == 1
-    lat = s[sd.S_LATC]
+    lat = s[sd.S.LATC]
     d = 1.0 - E2 * math.sin(LAT0 * DEG) ** 2
     r_n, r_e = A * (1.0 - E2) / d**1.5, A / math.sqrt(d)
     north = (lat - LAT0 * DEG) * (r_n + H0)
-    east = (s[sd.S_LONC] - LON0 * DEG) * (r_e + H0) * math.cos(LAT0 * DEG)
+    east = (s[sd.S.LONC] - LON0 * DEG) * (r_e + H0) * math.cos(LAT0 * DEG)
     assert north == pytest.approx(0.1, abs=1e-6) and east == pytest.approx(0.05, abs=1e-6)
 
 
@@ -606,7 +606,7 @@ def test_a_late_velocity_fix_before_the_first_update_is_compared_with_the_curren
     nu = 0 (no correction); interpolating over any interval (e.g. 1 s: 1 - 0.005 (1 - 0) = 0.995, corrected half
     way with P = R) would not. The position fix is put where the solution was 5 ms back, so it corrects nothing."""
     s = state(v=(1.0, 0.0, 0.0))
-    s[sd.S_VP:sd.S_VP + 3] = 0.0
+    s[sd.S.VP:sd.S.VP + 3] = 0.0
     f = live(s, p=vel_var(0.01))
     f.measure(s, CFG, T0 - 0.005, "gnss", *fix(n=-0.005), (1.0, 0.0, 0.0), 100.0, 100.0, 0.1)  # p(t_m) = -v 5 ms
     assert f.counters["gnss_vel_accepted"] == 1
@@ -743,7 +743,7 @@ def test_magnetometer_h_takes_the_inclination_of_the_samples_before(before: int)
     nis, x_n = mag_by_hand(tans, 0.01, 0.01, -0.1)
     assert f.counters == {"mag_accepted": len(tans)}
     assert f.ratios["mag"] == pytest.approx(nis / 25.0, rel=1e-12)
-    c = s[sd.S_C : sd.S_C + 9].reshape(3, 3)
+    c = s[sd.S.C : sd.S.C + 9].reshape(3, 3)
     assert math.atan2(c[2, 1], c[2, 2]) == pytest.approx(-x_n, rel=1e-9)
     s = state()
     f.start(s, CFG, np.zeros(3), 0.01)
@@ -824,7 +824,7 @@ def test_zupt_by_hand() -> None:
     f.measure(s, CFG, T0, "zupt")
     np.testing.assert_allclose(velocity(s), [0.01, -0.02, 0.005], rtol=0, atol=1e-15)
     assert f.counters == {"zupt_accepted": 1} and f.ratios == pytest.approx({"vel": 0.0128}, rel=1e-12)
-    s[sd.S_V] = 10.0
+    s[sd.S.V] = 10.0
     f.measure(s, CFG, T0, "zupt")
     assert f.counters["zupt_rejected"] == 1 and velocity(s)[0] == 10.0
 

@@ -359,7 +359,7 @@ def test_the_live_filter_places_a_frame_once_per_reset_counter() -> None:
     f.measure(s, cfg, t, "vision_pose", (1.0, 2.0, 3.0), None, *sig, 0)
     assert f.counters["vision_pose_accepted"] == 4
     def yaw() -> float:
-        return math.atan2(s[sd.S_C + 3], s[sd.S_C])  # C_b^n row-major: atan2(C21, C11)
+        return math.atan2(s[sd.S.C + 3], s[sd.S.C])  # C_b^n row-major: atan2(C21, C11)
 
     yaw0, psi0 = yaw(), f.bias[kf.B_VY]
     turn = np.array([[math.cos(0.01), -math.sin(0.01), 0.0], [math.sin(0.01), math.cos(0.01), 0.0], [0.0, 0.0, 1.0]])
