@@ -24,7 +24,7 @@ import math
 import numpy as np
 
 from mavins.core import earth
-from mavins.core.jit import kernel, sum_kernel
+from mavins.core.jit import inline_kernel, kernel, sum_kernel
 from mavins.core.rotation import (Mat9, dcm_to_quat_s, euler_to_dcm_s, mat3_mul_s, mat3t_vec_s, quat_mul_s,
                                    quat_to_dcm_s, quat_to_euler, rotvec_to_dcm_s)
 
@@ -48,7 +48,10 @@ GL_NODES, GL_WEIGHTS = gauss_legendre(5)
 @kernel
 def channel_eval(starts: np.ndarray, durs: np.ndarray, coefs: np.ndarray, count: int, t: float) -> tuple[float, float]:
     """Value and rate of one channel at time t (held constant-rate beyond its ends)."""
-    return channel_at(starts, durs, coefs, piece_index(starts, count, t), t)
+    n = starts.shape[0]
+    starts2 = starts.reshape((1, n))
+    return channel_at(starts2, durs.reshape((1, n)), coefs.reshape((1, n, coefs.shape[1])), 0,
+                      piece_index(starts2, 0, count, t), t)
 
 
 @kernel
@@ -60,10 +63,20 @@ def channel_values(starts: np.ndarray, durs: np.ndarray, coefs: np.ndarray, coun
 
 
 @kernel
-def piece_index(starts: np.ndarray, count: int, t: float) -> int:
-    """The piece of a channel (of ``count`` pieces starting at ``starts``) that holds t: the last one starting
-    at or before t (the first before its start)."""
-    k = np.searchsorted(starts[:count], t, side="right") - 1
+def piece_index(starts: np.ndarray, ch: int, count: int, t: float) -> int:
+    """The piece of channel ch (its ``count`` pieces start at ``starts[ch, :count]``, sorted) that holds t:
+    the last one starting at or before t (the first before its start). A binary search on the indexed
+    row (``searchsorted(..., side="right") - 1``, NaN after everything as numpy has it): no view is made."""
+    lo, hi = 0, count
+    if t != t:
+        lo = count
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if starts[ch, mid] <= t:
+            lo = mid + 1
+        else:
+            hi = mid
+    k = lo - 1
     return k if k > 0 else 0
 
 
@@ -71,30 +84,29 @@ def piece_index(starts: np.ndarray, count: int, t: float) -> int:
 def pieces_at(starts: np.ndarray, counts: np.ndarray, t: float, out: np.ndarray) -> None:
     """piece_index of every channel at t into ``out`` (N_CHANNELS integers)."""
     for c in range(N_CHANNELS):
-        out[c] = piece_index(starts[c], counts[c], t)
+        out[c] = piece_index(starts, c, counts[c], t)
 
 
-@kernel
-def channel_at(starts: np.ndarray, durs: np.ndarray, coefs: np.ndarray, k: int, t: float) -> tuple[float, float]:
-    """Value and rate at t of piece k of a channel: its polynomial of degree <= 6 in ``u = (t - start) / dur``
-    (Horner), continued with the end value and rate beyond u = 1 and linearly before u = 0. Inside a
-    sample interval, split at every channel's breaks, the piece of each channel is known once (pieces_at)."""
-    d = durs[k]
-    u = (t - starts[k]) / d
-    c = coefs[k]
+@inline_kernel
+def channel_at(starts: np.ndarray, durs: np.ndarray, coefs: np.ndarray, ch: int, k: int, t: float
+               ) -> tuple[float, float]:
+    """Value and rate at t of piece k of channel ch (row ch of ``starts``, ``durs``, ``coefs``): its
+    polynomial of degree <= 6 in ``u = (t - start) / dur`` (Horner), continued with the end value and rate
+    beyond u = 1 and linearly before u = 0. Inside a sample interval, split at every channel's breaks, the
+    piece of each channel is known once (pieces_at). The arrays are indexed, never sliced: no view is made."""
+    d = durs[ch, k]
+    u = (t - starts[ch, k]) / d
+    c0, c1, c2, c3 = coefs[ch, k, 0], coefs[ch, k, 1], coefs[ch, k, 2], coefs[ch, k, 3]
+    c4, c5, c6 = coefs[ch, k, 4], coefs[ch, k, 5], coefs[ch, k, 6]
     if u > 1.0:
         # beyond the last piece: continue with the end value and rate
-        v1 = c[0] + c[1] + c[2] + c[3] + c[4] + c[5] + c[6]
-        r1 = (c[1] + 2 * c[2] + 3 * c[3] + 4 * c[4] + 5 * c[5] + 6 * c[6]) / d
+        v1 = c0 + c1 + c2 + c3 + c4 + c5 + c6
+        r1 = (c1 + 2 * c2 + 3 * c3 + 4 * c4 + 5 * c5 + 6 * c6) / d
         return v1 + r1 * (u - 1.0) * d, r1
     if u < 0.0:
-        return c[0] + c[1] * u, c[1] / d
-    val = c[6]
-    for j in range(5, -1, -1):
-        val = val * u + c[j]
-    der = 6.0 * c[6]
-    for j in range(5, 0, -1):
-        der = der * u + j * c[j]
+        return c0 + c1 * u, c1 / d
+    val = (((((c6 * u + c5) * u + c4) * u + c3) * u + c2) * u + c1) * u + c0
+    der = ((((6.0 * c6 * u + 5 * c5) * u + 4 * c4) * u + 3 * c3) * u + 2 * c2) * u + c1
     return val, der / d
 
 
@@ -154,16 +166,19 @@ DISPLACEMENT_ROWS = (0, 3, 3, 0)  # into ends[j]: velocity at 0:3, displacement 
 
 
 @sum_kernel
-def _sine_sum(terms: np.ndarray, rows: tuple[int, int, int, int], c: np.ndarray, s: np.ndarray, rc: np.ndarray,
-              rs: np.ndarray, out: np.ndarray, at: int) -> None:
+def _sine_sum(terms: np.ndarray, rows: tuple[int, int, int, int], pc: np.ndarray, ps: np.ndarray, j: int,
+              rot: np.ndarray, slot: int, g: int, out: np.ndarray, at: int) -> None:
     """``out[at, sin_slot + i] += sum_k terms[sin_row + i, k] sin_k``, ``out[at, cos_slot + i] +=
-    sum_k terms[cos_row + i, k] cos_k`` (i = 0..2), where ``(cos_k, sin_k)`` is the phasor ``(c, s)[k]``
-    turned by ``(rc, rs)[k]`` (angle sum: ``cos(a + b) = c rc - s rs``, ``sin(a + b) = s rc + c rs``)."""
+    sum_k terms[cos_row + i, k] cos_k`` (i = 0..2), where ``(cos_k, sin_k)`` is the phasor
+    ``(pc, ps)[j, k]`` turned by ``rot[slot, :, g, k]`` (angle sum: ``cos(a + b) = c rc - s rs``,
+    ``sin(a + b) = s rc + c rs``). Every array is indexed, never sliced: a view would cost two atomic
+    reference counts per call."""
     sin_row, cos_row, sin_slot, cos_slot = rows
     a0 = a1 = a2 = b0 = b1 = b2 = 0.0
-    for k in range(c.shape[0]):
-        ck = c[k] * rc[k] - s[k] * rs[k]
-        sk = s[k] * rc[k] + c[k] * rs[k]
+    for k in range(pc.shape[1]):
+        c, s, rc, rs = pc[j, k], ps[j, k], rot[slot, 0, g, k], rot[slot, 1, g, k]
+        ck = c * rc - s * rs
+        sk = s * rc + c * rs
         a0 += terms[sin_row, k] * sk
         a1 += terms[sin_row + 1, k] * sk
         a2 += terms[sin_row + 2, k] * sk
@@ -180,46 +195,48 @@ def _sine_sum(terms: np.ndarray, rows: tuple[int, int, int, int], c: np.ndarray,
 
 @kernel
 def vib_sums(t: float, vib: np.ndarray, linvib: np.ndarray, out: np.ndarray) -> None:
-    """The vibration sums at t into ``out`` (VS_* slots, sine_terms), each phase evaluated directly."""
+    """The vibration sums at t into ``out[0]`` (VS_* slots, sine_terms), each phase evaluated directly."""
     ta, tl = sine_terms(vib, linvib)
-    block = out.reshape((1, VS_SIZE))
-    block[:] = 0.0
+    out[0, :] = 0.0
     for fam, terms, rows in ((vib, ta, ANGULAR_ROWS), (linvib, tl, LINEAR_ROWS)):
         ph = fam[:, 3] * t + fam[:, 4]
         n = fam.shape[0]
-        _sine_sum(terms, rows, np.cos(ph), np.sin(ph), np.ones(n), np.zeros(n), block, 0)
+        still = np.empty((1, 2, 1, n))  # the phasors as they are: turned by (1, 0)
+        still[0, 0, 0, :] = 1.0
+        still[0, 1, 0, :] = 0.0
+        _sine_sum(terms, rows, np.cos(ph).reshape((1, n)), np.sin(ph).reshape((1, n)), 0, still, 0, 0, out, 0)
 
 
-@kernel
-def vehicle_s(t: float, starts: np.ndarray, durs: np.ndarray, coefs: np.ndarray, pieces: np.ndarray, vs: np.ndarray
-              ) -> tuple[float, float, float, float, float, float, float, float, float, float, float, float]:
+@inline_kernel
+def vehicle_s(t: float, starts: np.ndarray, durs: np.ndarray, coefs: np.ndarray, pieces: np.ndarray, vs: np.ndarray,
+              vi: int) -> tuple[float, float, float, float, float, float, float, float, float, float, float, float]:
     """Vehicle roll, pitch, yaw (rad), their rates (rad/s), NED velocity (m/s) and acceleration
-    (m/s^2) at t, the linear vibration's from ``vs`` (VS_VEL, VS_ACC) added.
+    (m/s^2) at t, the linear vibration's from ``vs[vi]`` (VS_VEL, VS_ACC) added.
 
     ``v = [V cos psi, V sin psi, v_D]``, ``a = [V' cos psi - V psi' sin psi, V' sin psi + V psi' cos psi, v_D']``.
     """
-    r, rd = channel_at(starts[CH_ROLL], durs[CH_ROLL], coefs[CH_ROLL], pieces[CH_ROLL], t)
-    p, pd = channel_at(starts[CH_PITCH], durs[CH_PITCH], coefs[CH_PITCH], pieces[CH_PITCH], t)
-    y, yd = channel_at(starts[CH_YAW], durs[CH_YAW], coefs[CH_YAW], pieces[CH_YAW], t)
-    spd, spd_d = channel_at(starts[CH_SPEED], durs[CH_SPEED], coefs[CH_SPEED], pieces[CH_SPEED], t)
-    vd, vd_d = channel_at(starts[CH_VD], durs[CH_VD], coefs[CH_VD], pieces[CH_VD], t)
+    r, rd = channel_at(starts, durs, coefs, CH_ROLL, pieces[CH_ROLL], t)
+    p, pd = channel_at(starts, durs, coefs, CH_PITCH, pieces[CH_PITCH], t)
+    y, yd = channel_at(starts, durs, coefs, CH_YAW, pieces[CH_YAW], t)
+    spd, spd_d = channel_at(starts, durs, coefs, CH_SPEED, pieces[CH_SPEED], t)
+    vd, vd_d = channel_at(starts, durs, coefs, CH_VD, pieces[CH_VD], t)
     cy, sy = np.cos(y), np.sin(y)
     return (r, p, y, rd, pd, yd,
-            spd * cy + vs[VS_VEL], spd * sy + vs[VS_VEL + 1], vd + vs[VS_VEL + 2],
-            spd_d * cy - spd * yd * sy + vs[VS_ACC], spd_d * sy + spd * yd * cy + vs[VS_ACC + 1],
-            vd_d + vs[VS_ACC + 2])
+            spd * cy + vs[vi, VS_VEL], spd * sy + vs[vi, VS_VEL + 1], vd + vs[vi, VS_VEL + 2],
+            spd_d * cy - spd * yd * sy + vs[vi, VS_ACC], spd_d * sy + spd * yd * cy + vs[vi, VS_ACC + 1],
+            vd_d + vs[vi, VS_ACC + 2])
 
 
-@kernel
-def perturbation_s(t: float, vs: np.ndarray, consts: np.ndarray) -> tuple[Mat9, float, float, float]:
+@inline_kernel
+def perturbation_s(t: float, vs: np.ndarray, vi: int, consts: np.ndarray) -> tuple[Mat9, float, float, float]:
     """DCM ``C_p^v`` (row-major 9-tuple) and body rate (rad/s) of the angular perturbations at t.
 
-    Angular vibration ``exp(phi(t))`` (phi, phi' from ``vs``), then classic coning relative to
+    Angular vibration ``exp(phi(t))`` (phi, phi' from ``vs[vi]``), then classic coning relative to
     its start: ``q_c(0)^-1 (x) q_c(t)`` with the cone rate of sim.motion.classic_coning.
     """
-    px, py, pz = vs[VS_PHI], vs[VS_PHI + 1], vs[VS_PHI + 2]
+    px, py, pz = vs[vi, VS_PHI], vs[vi, VS_PHI + 1], vs[vi, VS_PHI + 2]
     c_p = rotvec_to_dcm_s(px, py, pz)
-    wx, wy, wz = right_jacobian_rate_s(px, py, pz, vs[VS_PHID], vs[VS_PHID + 1], vs[VS_PHID + 2])
+    wx, wy, wz = right_jacobian_rate_s(px, py, pz, vs[vi, VS_PHID], vs[vi, VS_PHID + 1], vs[vi, VS_PHID + 2])
     beta, wc = consts[K_BETA], consts[K_WCONE]
     if beta != 0.0:
         # q_c(t) = [cos b/2, sin b/2 cos wt, sin b/2 sin wt, 0], taken relative to t = 0
@@ -235,17 +252,31 @@ def perturbation_s(t: float, vs: np.ndarray, consts: np.ndarray) -> tuple[Mat9, 
     return c_p, wx, wy, wz
 
 
-@kernel
+@inline_kernel
+def _moves(coefs: np.ndarray, ch: int, k: int) -> bool:
+    """Whether piece k of channel ch has a nonzero coefficient (indexed: no view is made; one exit, so that
+    numba can prune the reference counts of the caller's arrays once this is inlined)."""
+    moving = False
+    for j in range(coefs.shape[2]):
+        if coefs[ch, k, j] != 0.0:
+            moving = True
+    return moving
+
+
+@inline_kernel
 def turntable_s(t: float, starts: np.ndarray, durs: np.ndarray, coefs: np.ndarray, pieces: np.ndarray
                 ) -> tuple[Mat9, float, float, float, float, float]:
     """``C_s^v = Rz(a1) Rx(a2)`` (9-tuple), the IMU's rate relative to the vehicle (in s), angles a1, a2.
-    No turntable (both channels' pieces zero, as in every scenario without one): the identity, at once."""
-    if not (coefs[CH_TT1, pieces[CH_TT1]].any() or coefs[CH_TT2, pieces[CH_TT2]].any()):
-        return (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0), 0.0, 0.0, 0.0, 0.0, 0.0
-    a1, r1 = channel_at(starts[CH_TT1], durs[CH_TT1], coefs[CH_TT1], pieces[CH_TT1], t)
-    a2, r2 = channel_at(starts[CH_TT2], durs[CH_TT2], coefs[CH_TT2], pieces[CH_TT2], t)
-    # rate of Rz(a1) Rx(a2) in s: Rx(a2)^T [0, 0, r1] + [r2, 0, 0]
-    return euler_to_dcm_s(a2, 0.0, a1), r2, np.sin(a2) * r1, np.cos(a2) * r1, a1, a2
+    No turntable (both channels' pieces zero, as in every scenario without one): the identity."""
+    c_sv = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+    wx = wy = wz = a1 = a2 = 0.0
+    if _moves(coefs, CH_TT1, pieces[CH_TT1]) or _moves(coefs, CH_TT2, pieces[CH_TT2]):
+        a1, r1 = channel_at(starts, durs, coefs, CH_TT1, pieces[CH_TT1], t)
+        a2, r2 = channel_at(starts, durs, coefs, CH_TT2, pieces[CH_TT2], t)
+        c_sv = euler_to_dcm_s(a2, 0.0, a1)
+        # rate of Rz(a1) Rx(a2) in s: Rx(a2)^T [0, 0, r1] + [r2, 0, 0]
+        wx, wy, wz = r2, np.sin(a2) * r1, np.cos(a2) * r1
+    return c_sv, wx, wy, wz, a1, a2
 
 
 @kernel
@@ -263,23 +294,23 @@ def imu_rates(
     use_earth: bool,
 ) -> tuple[np.ndarray, np.ndarray]:
     """True ``w_is^s`` (rad/s) and ``f^s`` (m/s^2) of the IMU at t, latitude, height (rates_s)."""
-    vs = np.empty(VS_SIZE)
+    vs = np.empty((1, VS_SIZE))
     vib_sums(t, vib, linvib, vs)
     pieces = np.empty(N_CHANNELS, dtype=np.int64)
     pieces_at(starts, counts, t, pieces)
-    r = rates_s(t, lat, h, starts, durs, coefs, pieces, vs, consts, use_earth)
+    r = rates_s(t, lat, h, starts, durs, coefs, pieces, vs, 0, consts, use_earth)
     return np.array([r[0], r[1], r[2]]), np.array([r[3], r[4], r[5]])
 
 
 @kernel
 def rates_s(
     t: float, lat: float, h: float, starts: np.ndarray, durs: np.ndarray, coefs: np.ndarray, pieces: np.ndarray,
-    vs: np.ndarray, consts: np.ndarray, use_earth: bool,
+    vs: np.ndarray, vi: int, consts: np.ndarray, use_earth: bool,
 ) -> tuple[float, float, float, float, float, float]:
-    """``w_is^s`` and ``f^s`` at t given the vibration sums ``vs`` there ([TW11] 11.1, inverted):
+    """``w_is^s`` and ``f^s`` at t given the vibration sums ``vs[vi]`` there ([TW11] 11.1, inverted):
     ``w_iv = w_nv + C_n^v (w_ie + w_en)``, ``f^v = C_n^v (a + (2 w_ie + w_en) x v - g)``, then
     through the perturbation and the turntable. Allocation-free (tuples)."""
-    r, p, y, rd, pd, yd, vn, ve, vd, an, ae, ad = vehicle_s(t, starts, durs, coefs, pieces, vs)
+    r, p, y, rd, pd, yd, vn, ve, vd, an, ae, ad = vehicle_s(t, starts, durs, coefs, pieces, vs, vi)
     c_vn = euler_to_dcm_s(r, p, y)
     sr, cr = np.sin(r), np.cos(r)
     sp, cp = np.sin(p), np.cos(p)
@@ -297,7 +328,7 @@ def rates_s(
     wvx, wvy, wvz = wnx + ux, wny + uy, wnz + uz
     ox, oy, oz = 2.0 * ien + enx, eny, 2.0 * ied + enz
     fx, fy, fz = mat3t_vec_s(c_vn, an + oy * vd - oz * ve, ae + oz * vn - ox * vd, ad + ox * ve - oy * vn - g)
-    c_pv, wpx, wpy, wpz = perturbation_s(t, vs, consts)
+    c_pv, wpx, wpy, wpz = perturbation_s(t, vs, vi, consts)
     wx, wy, wz = mat3t_vec_s(c_pv, wvx, wvy, wvz)
     fx, fy, fz = mat3t_vec_s(c_pv, fx, fy, fz)
     c_sp, wtx, wty, wtz, _, _ = turntable_s(t, starts, durs, coefs, pieces)
@@ -329,17 +360,21 @@ def quadrature_order(wh: float, tol: float = QUADRATURE_TOL) -> int:
 
 
 @kernel
-def _rotations(w: np.ndarray, hstep: float, nodes: np.ndarray, step: np.ndarray, rot: np.ndarray) -> None:
-    """cos and sin of ``w hstep`` (step[0], step[1]) and of ``w x_g hstep`` at the quadrature nodes
-    x_g (rot[0, g], rot[1, g]), for each angular frequency w (rad/s, one column each)."""
+def _rotations(w: np.ndarray, hstep: float, nodes: np.ndarray, step: np.ndarray, rot: np.ndarray, slot: int) -> None:
+    """cos and sin of ``w hstep`` (step[slot, 0], step[slot, 1]) and of ``w x_g hstep`` at the quadrature
+    nodes x_g (rot[slot, 0, g], rot[slot, 1, g]), for each angular frequency w (rad/s, one column each);
+    after the nodes, g = len(nodes), no turn (1, 0): the phasors as they are."""
+    ng = nodes.shape[0]
     for k in range(w.shape[0]):
         a = w[k] * hstep
-        step[0, k] = np.cos(a)
-        step[1, k] = np.sin(a)
-        for g in range(nodes.shape[0]):
+        step[slot, 0, k] = np.cos(a)
+        step[slot, 1, k] = np.sin(a)
+        for g in range(ng):
             b = w[k] * nodes[g] * hstep
-            rot[0, g, k] = np.cos(b)
-            rot[1, g, k] = np.sin(b)
+            rot[slot, 0, g, k] = np.cos(b)
+            rot[slot, 1, g, k] = np.sin(b)
+        rot[slot, 0, ng, k] = 1.0
+        rot[slot, 1, ng, k] = 0.0
 
 
 # Phasors are carried from piece to piece by rotation and evaluated afresh every ANCHOR_EVERY pieces,
@@ -350,8 +385,8 @@ ANCHOR_EVERY = 64
 @kernel
 def _piece_sums(
     ta0: float, anchor: bool, substeps: int, fam: np.ndarray, terms: np.ndarray, rows: tuple[int, int, int, int],
-    step: np.ndarray, rot: np.ndarray, carry: np.ndarray, pc: np.ndarray, ps: np.ndarray, node_vs: np.ndarray,
-    end_vs: np.ndarray,
+    step: np.ndarray, rot: np.ndarray, slot: int, carry: np.ndarray, pc: np.ndarray, ps: np.ndarray,
+    node_vs: np.ndarray, end_vs: np.ndarray,
 ) -> None:
     """Add one family of sinusoids (``fam``: rows of amplitude x, y, z, w, phase) to the vibration sums
     of a piece starting at ta0: at the quadrature nodes of each sub-step (node_vs[j n + g, VS_*]) and at
@@ -359,28 +394,30 @@ def _piece_sums(
     at the sub-step boundaries ``ta0 + j hstep`` (row j = 0 .. substeps).
 
     ``carry`` holds the phasors at ta0, evaluated directly when ``anchor``; the others follow by turning
-    them with the angle-sum identity by this hstep's rotations (_rotations: ``step``, ``rot``). On
-    return ``carry`` holds the phasors at the piece's end. ``terms``/``rows``: sine_terms and
+    them with the angle-sum identity by this hstep's rotations (_rotations: ``step[slot]``, ``rot[slot]``).
+    On return ``carry`` holds the phasors at the piece's end. ``terms``/``rows``: sine_terms and
     ANGULAR_ROWS or LINEAR_ROWS.
     """
     n = fam.shape[0]
-    ng = rot.shape[1]
+    ng = rot.shape[2] - 1
     if anchor:
         for k in range(n):
             a = fam[k, 3] * ta0 + fam[k, 4]
             carry[0, k] = np.cos(a)
             carry[1, k] = np.sin(a)
-    pc[0] = carry[0]
-    ps[0] = carry[1]
+    for k in range(n):
+        pc[0, k] = carry[0, k]
+        ps[0, k] = carry[1, k]
     for j in range(substeps):
         for k in range(n):
-            pc[j + 1, k] = pc[j, k] * step[0, k] - ps[j, k] * step[1, k]
-            ps[j + 1, k] = ps[j, k] * step[0, k] + pc[j, k] * step[1, k]
+            pc[j + 1, k] = pc[j, k] * step[slot, 0, k] - ps[j, k] * step[slot, 1, k]
+            ps[j + 1, k] = ps[j, k] * step[slot, 0, k] + pc[j, k] * step[slot, 1, k]
         for g in range(ng):
-            _sine_sum(terms, rows, pc[j], ps[j], rot[0, g], rot[1, g], node_vs, j * ng + g)
-    _sine_sum(terms, rows, pc[substeps], ps[substeps], step[2], step[3], end_vs, 0)
-    carry[0] = pc[substeps]
-    carry[1] = ps[substeps]
+            _sine_sum(terms, rows, pc, ps, j, rot, slot, g, node_vs, j * ng + g)
+    _sine_sum(terms, rows, pc, ps, substeps, rot, slot, ng, end_vs, 0)
+    for k in range(n):
+        carry[0, k] = pc[substeps, k]
+        carry[1, k] = ps[substeps, k]
 
 
 @kernel
@@ -432,27 +469,25 @@ def integrate(
     na, nl = vib.shape[0], linvib.shape[0]
     terms_a, terms_l = sine_terms(vib, linvib)
     cache_h = np.full(N_ROT_CACHE, np.nan)
-    # rows 0, 1: cos and sin of w hstep; rows 2, 3: 1 and 0 (no turn: the phasor itself)
-    step_a, step_l = np.empty((N_ROT_CACHE, 4, na)), np.empty((N_ROT_CACHE, 4, nl))
-    step_a[:, 2], step_a[:, 3], step_l[:, 2], step_l[:, 3] = 1.0, 0.0, 1.0, 0.0
-    rot_a, rot_l = np.empty((N_ROT_CACHE, 2, ng, na)), np.empty((N_ROT_CACHE, 2, ng, nl))
+    # per cached hstep: cos and sin of w hstep; of w x_g hstep at each node, and (1, 0) after them
+    step_a, step_l = np.empty((N_ROT_CACHE, 2, na)), np.empty((N_ROT_CACHE, 2, nl))
+    rot_a, rot_l = np.empty((N_ROT_CACHE, 2, ng + 1, na)), np.empty((N_ROT_CACHE, 2, ng + 1, nl))
     pc_a, ps_a = np.empty((substeps + 1, na)), np.empty((substeps + 1, na))
     pc_l, ps_l = np.empty((substeps + 1, nl)), np.empty((substeps + 1, nl))
     carry_a, carry_l = np.empty((2, na)), np.empty((2, nl))
     next_slot = 0
     acc_th = np.empty(3)
     acc_v = np.empty(3)
-    vs_rk = np.zeros(VS_SIZE)
     pieces = np.empty(N_CHANNELS, dtype=np.int64)
     n_pieces = 0  # pieces integrated (phasors re-anchored every ANCHOR_EVERY)
     for i in range(t.shape[0]):
         ti = t[i]
-        k0 = np.searchsorted(breaks, tp, side="right")
-        k1 = np.searchsorted(breaks, ti, side="left")
+        b0 = np.searchsorted(breaks, tp, side="right")  # the breaks inside (tp, ti)
+        b1 = np.searchsorted(breaks, ti, side="left")
         ne = 0
         edges[ne] = tp
         ne += 1
-        for k in range(k0, k1):
+        for k in range(b0, b1):
             edges[ne] = breaks[k]
             ne += 1
         edges[ne] = ti
@@ -469,32 +504,33 @@ def integrate(
             if slot < 0:
                 slot = next_slot
                 next_slot = (next_slot + 1) % N_ROT_CACHE
-                _rotations(vib[:, 3], hstep, nodes, step_a[slot], rot_a[slot])
-                _rotations(linvib[:, 3], hstep, nodes, step_l[slot], rot_l[slot])
+                _rotations(vib[:, 3], hstep, nodes, step_a, rot_a, slot)
+                _rotations(linvib[:, 3], hstep, nodes, step_l, rot_l, slot)
                 cache_h[slot] = hstep
             node_vs[:] = 0.0
             end_vs[:] = 0.0
             ends[:] = 0.0
             anchor = n_pieces % ANCHOR_EVERY == 0
             pieces_at(starts, counts, 0.5 * (ta0 + edges[piece + 1]), pieces)  # each channel's piece in here
-            _piece_sums(ta0, anchor, substeps, vib, terms_a, ANGULAR_ROWS, step_a[slot], rot_a[slot], carry_a,
+            _piece_sums(ta0, anchor, substeps, vib, terms_a, ANGULAR_ROWS, step_a, rot_a, slot, carry_a,
                         pc_a, ps_a, node_vs, end_vs)
-            _piece_sums(ta0, anchor, substeps, linvib, terms_l, LINEAR_ROWS, step_l[slot], rot_l[slot], carry_l,
+            _piece_sums(ta0, anchor, substeps, linvib, terms_l, LINEAR_ROWS, step_l, rot_l, slot, carry_l,
                         pc_l, ps_l, node_vs, end_vs)
             for j in range(substeps + 1):  # the linear vibration's velocity and displacement at the boundaries
-                _sine_sum(terms_l, DISPLACEMENT_ROWS, pc_l[j], ps_l[j], step_l[slot, 2], step_l[slot, 3], ends, j)
+                _sine_sum(terms_l, DISPLACEMENT_ROWS, pc_l, ps_l, j, rot_l, slot, ng, ends, j)
             n_pieces += 1
             for j in range(substeps):
                 ta = ta0 + j * hstep
                 hh = 0.5 * hstep
-                # classical RK4 on the smooth velocity, the vibration's displacement added exactly
-                k1 = pos_rate_s(ta, lat, lon, h, starts, durs, coefs, pieces, vs_rk, use_earth)
-                k2 = pos_rate_s(ta + hh, lat + hh * k1[0], lon + hh * k1[1], h + hh * k1[2], starts, durs, coefs,
-                                pieces, vs_rk, use_earth)
-                k3 = pos_rate_s(ta + hh, lat + hh * k2[0], lon + hh * k2[1], h + hh * k2[2], starts, durs, coefs,
-                                pieces, vs_rk, use_earth)
-                k4 = pos_rate_s(ta + hstep, lat + hstep * k3[0], lon + hstep * k3[1], h + hstep * k3[2], starts, durs,
-                                coefs, pieces, vs_rk, use_earth)
+                # classical RK4 on the smooth velocity, the vibration's displacement added exactly; k2 and k3
+                # share the velocity at ta + hstep/2, k4 and the end slope m1 the one at ta + hstep
+                va = smooth_velocity_s(ta, starts, durs, coefs, pieces)
+                vm = smooth_velocity_s(ta + hh, starts, durs, coefs, pieces)
+                vb = smooth_velocity_s(ta + hstep, starts, durs, coefs, pieces)
+                k1 = pos_rate_s(lat, h, va[0], va[1], va[2], use_earth)
+                k2 = pos_rate_s(lat + hh * k1[0], h + hh * k1[2], vm[0], vm[1], vm[2], use_earth)
+                k3 = pos_rate_s(lat + hh * k2[0], h + hh * k2[2], vm[0], vm[1], vm[2], use_earth)
+                k4 = pos_rate_s(lat + hstep * k3[0], h + hstep * k3[2], vb[0], vb[1], vb[2], use_earth)
                 sx, sy, sz = pos_scale_s(lat, h, use_earth)
                 h6 = hstep / 6.0
                 lat1 = lat + h6 * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0]) + sx * (ends[j + 1, 3] - ends[j, 3])
@@ -502,9 +538,8 @@ def integrate(
                 h1 = h + h6 * (k1[2] + 2.0 * k2[2] + 2.0 * k3[2] + k4[2]) + sz * (ends[j + 1, 5] - ends[j, 5])
                 # Hermite end slopes: the full velocity (smooth + vibration) at both ends
                 s0x, s0z = k1[0] + sx * ends[j, 0], k1[2] + sz * ends[j, 2]
-                vs_rk[VS_VEL:VS_VEL + 3] = ends[j + 1, 0:3]
-                m1 = pos_rate_s(ta + hstep, lat1, lon1, h1, starts, durs, coefs, pieces, vs_rk, use_earth)
-                vs_rk[VS_VEL:VS_VEL + 3] = 0.0
+                m1 = pos_rate_s(lat1, h1, vb[0] + ends[j + 1, 0], vb[1] + ends[j + 1, 1], vb[2] + ends[j + 1, 2],
+                                use_earth)
                 for g in range(ng):
                     x = nodes[g]
                     h00 = 2 * x**3 - 3 * x**2 + 1
@@ -513,7 +548,7 @@ def integrate(
                     h11 = x**3 - x**2
                     latn = h00 * lat + h10 * hstep * s0x + h01 * lat1 + h11 * hstep * m1[0]
                     hn = h00 * h + h10 * hstep * s0z + h01 * h1 + h11 * hstep * m1[2]
-                    r = rates_s(ta + x * hstep, latn, hn, starts, durs, coefs, pieces, node_vs[j * ng + g], consts,
+                    r = rates_s(ta + x * hstep, latn, hn, starts, durs, coefs, pieces, node_vs, j * ng + g, consts,
                                 use_earth)
                     wq = weights[g] * hstep
                     acc_th[0] += wq * r[0]
@@ -523,17 +558,18 @@ def integrate(
                     acc_v[1] += wq * r[4]
                     acc_v[2] += wq * r[5]
                 lat, lon, h = lat1, lon1, h1
-        dtheta[i] = acc_th
-        dv[i] = acc_v
+        for c in range(3):
+            dtheta[i, c] = acc_th[c]
+            dv[i, c] = acc_v[c]
         pos[i, 0] = lat
         pos[i, 1] = lon
         pos[i, 2] = h
         pieces_at(starts, counts, ti, pieces)
-        truth_row(ti, starts, durs, coefs, pieces, end_vs[0], consts, rows[i])
+        truth_row(ti, starts, durs, coefs, pieces, end_vs, 0, consts, rows, i)
         tp = ti
 
 
-@kernel
+@inline_kernel
 def pos_scale_s(lat: float, h: float, use_earth: bool) -> tuple[float, float, float]:
     """``d(lat, lon, h)/d(north, east, down)``: ``1/(R_N+h)``, ``1/((R_E+h) cos L)``, -1 (flat: 1, 1, -1)."""
     if use_earth:
@@ -542,14 +578,23 @@ def pos_scale_s(lat: float, h: float, use_earth: bool) -> tuple[float, float, fl
     return 1.0, 1.0, -1.0
 
 
-@kernel
-def pos_rate_s(t: float, lat: float, lon: float, h: float, starts: np.ndarray, durs: np.ndarray, coefs: np.ndarray,
-               pieces: np.ndarray, vs: np.ndarray, use_earth: bool) -> tuple[float, float, float]:
-    """Rate of (lat, lon, h) (or flat north, east, up) at t: ``L' = v_N/(R_N+h)``,
-    ``lon' = v_E/((R_E+h) cos L)``, ``h' = -v_D`` (linear vibration from ``vs``)."""
-    v = vehicle_s(t, starts, durs, coefs, pieces, vs)
+@inline_kernel
+def smooth_velocity_s(t: float, starts: np.ndarray, durs: np.ndarray, coefs: np.ndarray, pieces: np.ndarray
+                      ) -> tuple[float, float, float]:
+    """The channels' NED velocity (m/s) at t, no linear vibration: ``[V cos psi, V sin psi, v_D]`` (as
+    vehicle_s, from the three channels it needs)."""
+    y, _ = channel_at(starts, durs, coefs, CH_YAW, pieces[CH_YAW], t)
+    spd, _ = channel_at(starts, durs, coefs, CH_SPEED, pieces[CH_SPEED], t)
+    vd, _ = channel_at(starts, durs, coefs, CH_VD, pieces[CH_VD], t)
+    return spd * np.cos(y), spd * np.sin(y), vd
+
+
+@inline_kernel
+def pos_rate_s(lat: float, h: float, vn: float, ve: float, vd: float, use_earth: bool) -> tuple[float, float, float]:
+    """Rate of (lat, lon, h) (or flat north, east, up) for the NED velocity (m/s) at (lat, h):
+    ``L' = v_N/(R_N+h)``, ``lon' = v_E/((R_E+h) cos L)``, ``h' = -v_D``."""
     sx, sy, sz = pos_scale_s(lat, h, use_earth)
-    return v[6] * sx, v[7] * sy, v[8] * sz
+    return vn * sx, ve * sy, vd * sz
 
 
 @kernel
@@ -565,32 +610,33 @@ def truth(
     out: np.ndarray,
 ) -> None:
     """truth_row at each t (the vibration sums evaluated directly)."""
-    vs = np.empty(VS_SIZE)
+    vs = np.empty((1, VS_SIZE))
     pieces = np.empty(N_CHANNELS, dtype=np.int64)
     for i in range(t.shape[0]):
         vib_sums(t[i], vib, linvib, vs)
         pieces_at(starts, counts, t[i], pieces)
-        truth_row(t[i], starts, durs, coefs, pieces, vs, consts, out[i])
+        truth_row(t[i], starts, durs, coefs, pieces, vs, 0, consts, out, i)
 
 
 @kernel
 def truth_row(t: float, starts: np.ndarray, durs: np.ndarray, coefs: np.ndarray, pieces: np.ndarray, vs: np.ndarray,
-              consts: np.ndarray, out: np.ndarray) -> None:
-    """True velocity and attitudes at t: ``vn, ve, vd, q_ns[4], q_nv[4], a1, a2`` (vibration sums ``vs``).
+              vi: int, consts: np.ndarray, out: np.ndarray, oi: int) -> None:
+    """True velocity and attitudes at t into ``out[oi]``: ``vn, ve, vd, q_ns[4], q_nv[4], a1, a2``
+    (vibration sums ``vs[vi]``).
 
     ``q_ns`` is the IMU's attitude (what the strapdown solution estimates),
     ``q_nv`` the vehicle's (angular vibration and coning included), a1/a2 the
     turntable angles (rad).
     """
-    r, p, y, _, _, _, vn, ve, vd, _, _, _ = vehicle_s(t, starts, durs, coefs, pieces, vs)
-    c_pv, _, _, _ = perturbation_s(t, vs, consts)
+    r, p, y, _, _, _, vn, ve, vd, _, _, _ = vehicle_s(t, starts, durs, coefs, pieces, vs, vi)
+    c_pv, _, _, _ = perturbation_s(t, vs, vi, consts)
     c_sp, _, _, _, a1, a2 = turntable_s(t, starts, durs, coefs, pieces)
     c_nv = mat3_mul_s(euler_to_dcm_s(r, p, y), c_pv)
-    out[0], out[1], out[2] = vn, ve, vd
-    out[3], out[4], out[5], out[6] = dcm_to_quat_s(mat3_mul_s(c_nv, c_sp))
-    out[7], out[8], out[9], out[10] = dcm_to_quat_s(c_nv)
-    out[11] = a1
-    out[12] = a2
+    out[oi, 0], out[oi, 1], out[oi, 2] = vn, ve, vd
+    out[oi, 3], out[oi, 4], out[oi, 5], out[oi, 6] = dcm_to_quat_s(mat3_mul_s(c_nv, c_sp))
+    out[oi, 7], out[oi, 8], out[oi, 9], out[oi, 10] = dcm_to_quat_s(c_nv)
+    out[oi, 11] = a1
+    out[oi, 12] = a2
 
 
 @kernel

@@ -59,8 +59,16 @@ def sum_kernel(func: F) -> F:
     return _compiled_kernel(func, fastmath={"reassoc", "contract"})
 
 
-def _compiled_kernel(func: F, fastmath: bool | set[str]) -> F:
-    dispatcher = numba.njit(cache=True, nogil=True, error_model="numpy", fastmath=fastmath)(func)
+def inline_kernel(func: F) -> F:
+    """:func:`kernel` that numba inlines into each kernel calling it (``inline="always"``): for a small
+    helper that takes arrays, called in a hot loop. A call to a kernel that is not inlined keeps the
+    reference counts of the caller's arrays (two atomic operations per array and call); inlined, numba
+    prunes them. Never for a kernel Python calls."""
+    return _compiled_kernel(func, fastmath=False, inline="always")
+
+
+def _compiled_kernel(func: F, fastmath: bool | set[str], inline: str = "never") -> F:
+    dispatcher = numba.njit(cache=True, nogil=True, error_model="numpy", fastmath=fastmath, inline=inline)(func)
     if dispatcher is not func:  # not under NUMBA_DISABLE_JIT=1
         aot.attach(dispatcher)
     return dispatcher

@@ -275,6 +275,24 @@ def test_linear_vibration_closed_form(yaw) -> None:
     assert np.max(np.abs(lab_ned(res.truth) - p)) < POS_FLOOR
 
 
+def test_piece_index_is_numpys_searchsorted_on_the_channels_row() -> None:
+    """kinematics.piece_index (a binary search on row ch of the starts, no view made): the last piece
+    starting at or before t, the first before the first start, as ``searchsorted(side="right") - 1``
+    clipped at 0 on ``starts[ch, :count]``; ties, the ends, NaN (after everything, as numpy sorts it) and
+    the padding beyond ``count`` (never read)."""
+    rng = np.random.default_rng(7)
+    starts = np.full((3, 12), np.inf)  # padding beyond each row's count
+    counts = (1, 5, 9)
+    for ch, n in enumerate(counts):
+        starts[ch, :n] = np.sort(np.round(rng.uniform(0.0, 10.0, n), 1))
+    starts[2, 3:5] = starts[2, 2]  # a tie: three pieces starting at once
+    for ch, n in enumerate(counts):
+        row = starts[ch, :n]
+        for t in [*row, *(row + 1e-9), *(row - 1e-9), -5.0, 50.0, math.nan, *rng.uniform(-1.0, 11.0, 40)]:
+            want = max(int(np.searchsorted(row, t, side="right")) - 1, 0)
+            assert kin.piece_index(starts, ch, n, float(t)) == want, (ch, t)
+
+
 @pytest.mark.parametrize("wh, nodes", [(0.5, 5), (1.0, 6), (2 * math.pi * 90.0 / 250.0, 8), (4.0, 9)])
 def test_quadrature_order_is_the_fewest_nodes_within_the_remainder_bound(wh, nodes) -> None:
     """[AS64] 25.4.30 on [0, h]: remainder (n!)^4 / ((2n+1)((2n)!)^3) (W h)^(2n) relative to A h.
