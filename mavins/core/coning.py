@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .jit import kernel
+from .jit import inline_kernel, kernel
 
 #: ``CONING_COEFFS[N, :N-1]`` are the N-sample coefficients, oldest sample first
 #: (docs/conventions.md ``--samples``). Row 1 (and row 0) are unused.
@@ -44,7 +44,7 @@ MAX_SAMPLES = 6
 Vec3 = tuple[float, float, float]
 
 
-@kernel
+@inline_kernel
 def nsample_coning(buf: np.ndarray, off: int, n: int) -> Vec3:
     """N-sample coning correction ``[sum_{i<N} k_{N-i} dtheta_i] x dtheta_N`` (rad).
 
@@ -62,7 +62,7 @@ def nsample_coning(buf: np.ndarray, off: int, n: int) -> Vec3:
     return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
 
 
-@kernel
+@inline_kernel
 def nsample_sculling(buf: np.ndarray, off_th: int, off_dv: int, n: int) -> Vec3:
     """N-sample sculling correction ``sum_{i<N} k_{N-i} (dth_i x dv_N + dv_i x dth_N)`` (m/s).
 

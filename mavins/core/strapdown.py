@@ -55,7 +55,7 @@ from .coning import (
     rate_sculling,
     rotation_compensation,
 )
-from .jit import call_for_frame, kernel
+from .jit import call_for_frame, inline_kernel, kernel
 from .rotation import (
     SMALL_ANGLE,
     Mat9,
@@ -255,7 +255,7 @@ def init_state(
     return s
 
 
-@kernel
+@inline_kernel
 def _wander_latlon(s: np.ndarray) -> tuple[float, float, float, float]:
     """Latitude, longitude (rad) and the wander angle's cosine and sine from ``C_w^e``.
 
@@ -274,13 +274,12 @@ def _wander_latlon(s: np.ndarray) -> tuple[float, float, float, float]:
     return lat, np.arctan2(-s[c + 5], -s[c + 2]), c20 / cl, -c21 / cl
 
 
-@kernel
-def position(s: np.ndarray, cfg: np.ndarray, frame: int) -> tuple[float, float, float]:
+@inline_kernel
+def _position_of(s: np.ndarray, cfg: np.ndarray, frame: int) -> tuple[float, float, float]:
     """Latitude, longitude (rad) and height (m) of the state.
 
-    ``frame`` is :func:`kernel_frame` of cfg, a compile-time constant: each frame's kernel
-    holds only its own branch (FREE shares WANDER's)."""
-    literally(frame)
+    ``frame`` is :func:`kernel_frame` of cfg, a compile-time constant (the calling kernel's): each
+    frame's kernel holds only its own branch (FREE shares WANDER's). Inlined into its callers."""
     if cfg[CFG_EARTH] > 0.5:
         if frame == INERTIAL and s[S.INI] > 0.5:
             lat, lon, h, _x, _y, _z, _r = _inertial_position(s, s[S.T])
@@ -300,14 +299,28 @@ def position(s: np.ndarray, cfg: np.ndarray, frame: int) -> tuple[float, float, 
 
 
 @kernel
-def sync_position(s: np.ndarray, cfg: np.ndarray, frame: int) -> None:
-    """Refresh the latitude/longitude kept beside C_n^e; call after writing C_n^e or h directly."""
+def position(s: np.ndarray, cfg: np.ndarray, frame: int) -> tuple[float, float, float]:
+    """Latitude, longitude (rad) and height (m) of the state (:func:`_position_of`, for Python:
+    ``frame`` made a compile-time constant)."""
     literally(frame)
-    lat, lon, h = position(s, cfg, frame)
+    return _position_of(s, cfg, frame)
+
+
+@inline_kernel
+def _sync_position(s: np.ndarray, cfg: np.ndarray, frame: int) -> None:
+    """Refresh the latitude/longitude kept beside C_n^e (``frame``: the calling kernel's constant)."""
+    lat, lon, h = _position_of(s, cfg, frame)
     s[S.LATC] = lat
     s[S.LONC] = lon
     if frame == INERTIAL and s[S.INI] > 0.5:
         s[S.H] = h
+
+
+@kernel
+def sync_position(s: np.ndarray, cfg: np.ndarray, frame: int) -> None:
+    """Refresh the latitude/longitude kept beside C_n^e; call after writing C_n^e or h directly."""
+    literally(frame)
+    _sync_position(s, cfg, frame)
 
 
 @kernel
@@ -359,7 +372,7 @@ def _wander_row(s: np.ndarray, out: np.ndarray) -> None:
     _write_ned_row(out, s[S.T], lat, lon, s[S.H], ca * vx - sa * vy, sa * vx + ca * vy, s[S.V + 2], c)
 
 
-@kernel
+@inline_kernel
 def _inertial_position(s: np.ndarray, t: float) -> tuple[float, float, float, float, float, float, float]:
     """Latitude, longitude (rad), height (m), ECEF position (m) and R_E (m) of the inertial
     state at time t: ``r^e = Rz(-Omega (t - t0)) r^i`` (ECI = ECEF at t0). At a pole
@@ -391,7 +404,7 @@ def _inertial_row(s: np.ndarray, out: np.ndarray) -> None:
                    n2 * vex + n5 * vey + n8 * vz, c)
 
 
-@kernel
+@inline_kernel
 def _enter_inertial(s: np.ndarray) -> None:
     """Turn a fresh NED state into the inertial frame at its time t0 (ECI = ECEF then):
     ``C_b^i = C_n^e C_b^n``, ``r^i = r^e``, ``v^i = C_n^e v^n + Omega x r^e`` ([ZS1] eq. 1-3-14)."""
@@ -414,7 +427,7 @@ def _enter_inertial(s: np.ndarray) -> None:
     s[S.GN] = 0.0
 
 
-@kernel
+@inline_kernel
 def _inertial_hold(s: np.ndarray, cfg: np.ndarray, vx: float, vy: float, vz: float) -> tuple[float, float, float]:
     """``--vertical hold`` in the inertial frame: move r^i along the ellipsoid normal back to the
     initial height and set the velocity's component along it (relative to the Earth, ``v^i -
@@ -431,12 +444,12 @@ def _inertial_hold(s: np.ndarray, cfg: np.ndarray, vx: float, vy: float, vz: flo
     dh = s[S.H0] - h
     s[S.RI], s[S.RI + 1], s[S.RI + 2] = x + dh * nx, y + dh * ny, z + dh * nz
     dv = -s[S.VD0] - (nx * (vx + earth.OMEGA * y) + ny * (vy - earth.OMEGA * x) + nz * vz)
-    sync_position(s, cfg, INERTIAL)
+    _sync_position(s, cfg, INERTIAL)
     wx, wy = -earth.OMEGA * dh * ny, earth.OMEGA * dh * nx  # Omega x dr, Omega = [0, 0, OMEGA]
     return vx + wx + dv * nx, vy + wy + dv * ny, vz + dv * nz
 
 
-@kernel
+@inline_kernel
 def _l_cycle_inertial(s: np.ndarray, cfg: np.ndarray, T: float, vmx: float, vmy: float, vmz: float) -> None:
     """The l cycle of the inertial frame ([ZS] 2.1): no Earth or transport rate; gravitation
     ``G = g + Omega x (Omega x r)`` ([ZS1] eq. 1-3-26, g the contract's normal gravity along the
@@ -563,7 +576,7 @@ def body_update_dcm(x: float, y: float, z: float, order: int) -> Mat9:
     return dcm_from_coeffs_s(x, y, z, a1, a2)
 
 
-@kernel
+@inline_kernel
 def _body_increments(s: np.ndarray, cfg: np.ndarray, n: int) -> tuple[float, float, float, float, float, float,
                                                                       float, float, float]:
     """Step 1, increments: the k cycle's body rotation vector sigma (rad, coning included),
@@ -589,13 +602,12 @@ def _body_increments(s: np.ndarray, cfg: np.ndarray, n: int) -> tuple[float, flo
     return sx + cx, sy + cy, sz + cz, vx, vy, vz, ux, uy, uz
 
 
-@kernel
+@inline_kernel
 def _l_cycle(s: np.ndarray, cfg: np.ndarray, frame: int, T: float, lat: float, h: float, vmx: float, vmy: float,
              vmz: float) -> None:
     """Slow terms at the extrapolated mid-interval point (l cycle): Earth rate, transport
     rate (and its radius coefficients, which the position step reuses) and gravity
     ([TW11] 11.4, "evaluated at the l rate"); lat (rad), h (m) at the start of the interval."""
-    literally(frame)
     if cfg[CFG_EARTH] < 0.5:
         for i in range(3):
             s[S.WIE + i] = 0.0
@@ -622,7 +634,7 @@ def _l_cycle(s: np.ndarray, cfg: np.ndarray, frame: int, T: float, lat: float, h
     s[S.G] = g
 
 
-@kernel
+@inline_kernel
 def _wander_terms(s: np.ndarray, r0: float, r1: float, r2: float, h: float, free: bool) -> float:
     """Transport-rate coefficients of the wander (or free-azimuth) frame at the point whose
     ``C_w^e`` third row is ``(r0, r1, r2) = (cos L cos alpha, -cos L sin alpha, -sin L)``, height
@@ -648,7 +660,7 @@ def _wander_terms(s: np.ndarray, r0: float, r1: float, r2: float, h: float, free
     return earth.gravity_sin(sl, r_e, h)
 
 
-@kernel
+@inline_kernel
 def _l_cycle_wander(s: np.ndarray, cfg: np.ndarray, T: float, h: float, vmx: float, vmy: float,
                     vmz: float) -> None:
     """The l cycle of the wander and free-azimuth frames ([ZS] 2.2, 2.3).
@@ -676,7 +688,7 @@ def _l_cycle_wander(s: np.ndarray, cfg: np.ndarray, T: float, h: float, vmx: flo
     s[S.WEN + 2] = s[S.RZ]
 
 
-@kernel
+@inline_kernel
 def _velocity_step(s: np.ndarray, T: float, sgx: float, sgy: float, sgz: float, vsx: float, vsy: float,
                    vsz: float, scx: float, scy: float, scz: float, zx: float, zy: float, zz: float,
                    dzx: float, dzy: float, dzz: float, vmx: float, vmy: float,
@@ -718,7 +730,7 @@ def _velocity_step(s: np.ndarray, T: float, sgx: float, sgy: float, sgz: float, 
     return vnx, vny, vnz
 
 
-@kernel
+@inline_kernel
 def _attitude_step(s: np.ndarray, cfg: np.ndarray, sgx: float, sgy: float, sgz: float,
                    zx: float, zy: float, zz: float) -> None:
     """Step 4, attitude: ``C_b^n(k) = B C_b^n(k-1) A(sigma)``, ``B = exp(-[zeta x])``, or in
@@ -754,7 +766,7 @@ def _attitude_step(s: np.ndarray, cfg: np.ndarray, sgx: float, sgy: float, sgz: 
     _put9(s, S.C, quat_to_dcm_s((q0, q1, q2, q3)))
 
 
-@kernel
+@inline_kernel
 def _rotate_position(s: np.ndarray, x: float, y: float, z: float) -> None:
     """``C_n^e <- C_n^e exp([xi x])`` written as ``C + C (a1 [xi x] + a2 [xi x]^2)``.
 
@@ -784,7 +796,7 @@ def _rotate_position(s: np.ndarray, x: float, y: float, z: float) -> None:
         s[i + 2] = c2 + (c0 * d2 + c1 * d5 + c2 * d8)
 
 
-@kernel
+@inline_kernel
 def _position_step(s: np.ndarray, cfg: np.ndarray, frame: int, T: float, vnx: float, vny: float,
                    vnz: float) -> tuple[float, float, float]:
     """Step 3, position: ``C_n^e(k) = C_n^e(k-1) exp([xi x])``, ``xi = w_en^n(v_eff) T``,
@@ -793,7 +805,6 @@ def _position_step(s: np.ndarray, cfg: np.ndarray, frame: int, T: float, vnx: fl
     those of the l cycle at the mid-interval point (1e-12 relative from the
     effective-velocity midpoint at 100 Hz, below double precision in xi). Returns xi (rad; 0 in
     the inertial frame and without the Earth model)."""
-    literally(frame)
     vox, voy, voz = s[S.V], s[S.V + 1], s[S.V + 2]
     rule = int(cfg[CFG_POSINT])
     if rule == 0:
@@ -830,11 +841,11 @@ def _position_step(s: np.ndarray, cfg: np.ndarray, frame: int, T: float, vnx: fl
         s[S.PF + 2] = 0.0
     else:
         s[S.H] -= ez * T
-    sync_position(s, cfg, frame)
+    _sync_position(s, cfg, frame)
     return xn, xe, xd
 
 
-@kernel
+@inline_kernel
 def _first_mid_velocity(s: np.ndarray, cfg: np.ndarray, frame: int, T: float, sgx: float, sgy: float, sgz: float,
                         vsx: float, vsy: float, vsz: float, scx: float, scy: float,
                         scz: float) -> tuple[float, float, float]:
@@ -844,7 +855,6 @@ def _first_mid_velocity(s: np.ndarray, cfg: np.ndarray, frame: int, T: float, sg
     (2 w_ie + w_en) x a`` in v(1) (1e-9 m/s in level flight at 45 deg, 0.8 um of position after
     a quarter Schuler period). Predicted v(1) with ``v_mid = v(0)``, then ``(v(0) + v(1))/2``.
     (The inertial frame has no Coriolis term; there v_mid only places gravitation.)"""
-    literally(frame)
     vx, vy, vz = s[S.V], s[S.V + 1], s[S.V + 2]
     _l_cycle(s, cfg, frame, T, s[S.LATC], s[S.H], vx, vy, vz)
     px, py, pz = _velocity_step(s, T, sgx, sgy, sgz, vsx, vsy, vsz, scx, scy, scz, (s[S.WIE] + s[S.WEN]) * T,

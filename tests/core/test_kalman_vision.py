@@ -13,6 +13,7 @@ import pytest
 from mavins.core import errmodel as em
 from mavins.core import kalman as kf
 from mavins.core import strapdown as sd
+from mavins.core.jit import for_frame
 from support import cbn
 
 VP = slice(em.X_VP, em.X_VP + 3)
@@ -228,7 +229,7 @@ def test_the_placed_frames_covariance_matches_a_monte_carlo() -> None:
         x = np.zeros(em.NX)
         x[:9] = rng.normal(0.0, np.sqrt(np.diag(P0)[:9]))
         st, bt = moved(s, bias0, x)  # the truth: the estimate less its error
-        lat, lon, h = sd.position(st, cfg, sd.GEOGRAPHIC)
+        lat, lon, h = for_frame(sd.position, sd.GEOGRAPHIC)(st, cfg)  # compiled once, not per call
         r_n, r_e = radii(lat)
         p_true = np.array([(lat - REF[0]) * (r_n + h), (lon - REF[1]) * (r_e + h) * math.cos(lat), REF[2] - h])
         c_true = st[sd.S.C:sd.S.C + 9].reshape(3, 3)
