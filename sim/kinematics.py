@@ -527,11 +527,11 @@ def integrate(
                 va = smooth_velocity_s(ta, starts, durs, coefs, pieces)
                 vm = smooth_velocity_s(ta + hh, starts, durs, coefs, pieces)
                 vb = smooth_velocity_s(ta + hstep, starts, durs, coefs, pieces)
-                k1 = pos_rate_s(lat, h, va[0], va[1], va[2], use_earth)
+                sx, sy, sz = pos_scale_s(lat, h, use_earth)  # at the step's start: k1's, and the vibration's
+                k1 = (va[0] * sx, va[1] * sy, va[2] * sz)  # pos_rate_s at (lat, h)
                 k2 = pos_rate_s(lat + hh * k1[0], h + hh * k1[2], vm[0], vm[1], vm[2], use_earth)
                 k3 = pos_rate_s(lat + hh * k2[0], h + hh * k2[2], vm[0], vm[1], vm[2], use_earth)
                 k4 = pos_rate_s(lat + hstep * k3[0], h + hstep * k3[2], vb[0], vb[1], vb[2], use_earth)
-                sx, sy, sz = pos_scale_s(lat, h, use_earth)
                 h6 = hstep / 6.0
                 lat1 = lat + h6 * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0]) + sx * (ends[j + 1, 3] - ends[j, 3])
                 lon1 = lon + h6 * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1]) + sy * (ends[j + 1, 4] - ends[j, 4])

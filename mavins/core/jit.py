@@ -60,10 +60,11 @@ def sum_kernel(func: F) -> F:
 
 
 def inline_kernel(func: F) -> F:
-    """:func:`kernel` that numba inlines into each kernel calling it (``inline="always"``): for a small
-    helper that takes arrays, called in a hot loop. A call to a kernel that is not inlined keeps the
-    reference counts of the caller's arrays (two atomic operations per array and call); inlined, numba
-    prunes them. Never for a kernel Python calls."""
+    """:func:`kernel` that numba inlines into each kernel calling it (``inline="always"``): for a helper
+    that takes arrays, called in a hot loop. A call to a kernel that is not inlined keeps the reference
+    counts of the caller's arrays (two atomic operations per array and call); inlined, numba prunes them.
+    It takes a mechanisation frame as its caller's constant and never calls ``literally`` (the inliner
+    cannot); what Python calls with a frame is a ``literally`` wrapper around it (strapdown.position)."""
     return _compiled_kernel(func, fastmath=False, inline="always")
 
 
