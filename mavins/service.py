@@ -35,7 +35,7 @@ from .live.engine import EngineConfig, State
 from .common.files import SolutionWriter
 from .link import publish
 from .link.ingest import IMU_MESSAGES, IngestConfig
-from .link.links import Link, PeerPolicy, open_link
+from .link.links import Link, PeerPolicy, datagrams, open_link
 from .link.mavlink import mavlink
 from .live.pipeline import Pipeline
 from .record.sink import GuardedSink, Sink
@@ -183,12 +183,11 @@ class Service:
     def _send(self, msgs: list[mavlink.MAVLink_message]) -> None:
         if not self._sysid_known:
             return
+        frames = []
         for m in msgs:
-            if self.signer is not None:
-                buf = self.signer.pack(m, self.mav)
-            else:
-                buf = m.pack(self.mav)
+            frames.append(self.signer.pack(m, self.mav) if self.signer is not None else m.pack(self.mav))
             self.mav.seq = (self.mav.seq + 1) % 256
+        for buf in datagrams(frames):
             for link in (self.master, *self.outs):
                 try:
                     link.send(buf)

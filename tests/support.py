@@ -309,8 +309,12 @@ class StampedReceiver:
             if not select.select([self.sock], [], [], 0.05)[0]:
                 continue
             for arrival, data in recv_stamped(self.sock):
-                for m in self._parser.parse_buffer(data) or []:
-                    self.take(arrival, m)
+                self.datagram(arrival, data, list(self._parser.parse_buffer(data) or []))
+
+    def datagram(self, arrival: float, data: bytes, msgs: list) -> None:  # type: ignore[type-arg]
+        """One datagram's bytes and the messages parsed from it (each goes to ``take``)."""
+        for m in msgs:
+            self.take(arrival, m)
 
     def close(self) -> None:
         self._stop.set()

@@ -155,13 +155,18 @@ def latlon_from_cne_s(c01: float, c11: float, c20: float, c21: float, c22: float
 @kernel
 def lla_to_ecef(lat: float, lon: float, h: float) -> np.ndarray:
     """Earth-fixed Cartesian position (m) of a geodetic point (WGS-84, NIMA TR8350.2)."""
+    out = np.empty(3)
+    out[0], out[1], out[2] = lla_to_ecef_s(lat, lon, h)
+    return out
+
+
+@kernel
+def lla_to_ecef_s(lat: float, lon: float, h: float) -> tuple[float, float, float]:
+    """:func:`lla_to_ecef` as a 3-tuple: ``x = (R_E + h) cos L cos l``, ``y = (R_E + h) cos L sin l``,
+    ``z = (R_E (1 - e^2) + h) sin L`` (NIMA TR8350.2 eq. 4-14)."""
     r_n, r_e = radii(lat)
     cl = np.cos(lat)
-    out = np.empty(3)
-    out[0] = (r_e + h) * cl * np.cos(lon)
-    out[1] = (r_e + h) * cl * np.sin(lon)
-    out[2] = (r_e * (1.0 - E2) + h) * np.sin(lat)
-    return out
+    return (r_e + h) * cl * np.cos(lon), (r_e + h) * cl * np.sin(lon), (r_e * (1.0 - E2) + h) * np.sin(lat)
 
 
 @kernel

@@ -68,6 +68,9 @@ EXPORTS = (
     Export("earth", "radii", "UniTuple(f8, 2)(f8)"),
     Export("earth", "lla_to_ecef", f"{V}(f8, f8, f8)"),
     Export("earth", "cne_from_latlon", f"{M}(f8, f8)"),
+    # every output set: its local NED position and its body-to-NED rotation (mavins/link/publish.py)
+    Export("frames", "local_ned_s", "UniTuple(f8, 3)(f8, f8, f8, f8, f8, f8)"),
+    Export("rotation", "quat_to_dcm_s", "UniTuple(f8, 9)(UniTuple(f8, 4))"),
     Export("earth", "earth_rate_n", f"{V}(f8)"),
     Export("rotation", "euler_to_quat", f"{V}(f8, f8, f8)"),
     Export("rotation", "euler_to_dcm", f"{M}(f8, f8, f8)"),

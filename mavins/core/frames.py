@@ -7,18 +7,27 @@ import math
 import numpy as np
 
 from . import earth
+from .jit import kernel
 
 
 def local_ned(lat: float, lon: float, h: float, origin: tuple[float, float, float]) -> np.ndarray:
-    """NED offset (m) of a point (rad, rad, m) from the origin (deg, deg, m).
+    """NED offset (m) of a point (rad, rad, m) from the origin (deg, deg, m): :func:`local_ned_s`."""
+    return np.array(local_ned_s(lat, lon, h, math.radians(origin[0]), math.radians(origin[1]), origin[2]))
+
+
+@kernel
+def local_ned_s(lat: float, lon: float, h: float, lat0: float, lon0: float, h0: float) -> tuple[float, float, float]:
+    """NED offset (m) of a point from an origin, both (rad, rad, m), as a 3-tuple.
 
     The exact ECEF difference rotated into the origin's NED frame:
     ``p^n = C_e^n(origin) (r^e(p) - r^e(origin))`` (WGS-84 geodetic to ECEF,
     NIMA TR8350.2 eq. 4-14; C_n^e as in earth.py).
     """
-    lat0, lon0, h0 = math.radians(origin[0]), math.radians(origin[1]), origin[2]
-    d = earth.lla_to_ecef(lat, lon, h) - earth.lla_to_ecef(lat0, lon0, h0)
-    return earth.cne_from_latlon(lat0, lon0).T @ d
+    x, y, z = earth.lla_to_ecef_s(lat, lon, h)
+    x0, y0, z0 = earth.lla_to_ecef_s(lat0, lon0, h0)
+    dx, dy, dz = x - x0, y - y0, z - z0
+    c00, c01, c02, c10, c11, c12, c20, c21, c22 = earth.cne_from_latlon_s(lat0, lon0)
+    return c00 * dx + c10 * dy + c20 * dz, c01 * dx + c11 * dy + c21 * dz, c02 * dx + c12 * dy + c22 * dz
 
 
 def north_east_error(lat: float, lon: float, lat_ref: float, lon_ref: float) -> tuple[float, float]:

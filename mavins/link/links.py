@@ -35,6 +35,29 @@ SO_TIMESTAMP = getattr(socket, "SO_TIMESTAMP", 29 if _LINUX else None)
 SO_RXQ_OVFL = getattr(socket, "SO_RXQ_OVFL", 40 if _LINUX else None)
 
 
+# bytes: MAVLink frames sent together share a datagram up to this size, which fits an Ethernet
+# frame (1500 - 20 IP - 8 UDP), so that no datagram is fragmented on its way (docs/autopilots.md)
+MAX_OUT_DATAGRAM = 1472
+
+
+def datagrams(frames: list[bytes], limit: int = MAX_OUT_DATAGRAM) -> list[bytes]:
+    """Consecutive frames joined, in order, into as few byte strings of at most ``limit`` bytes as
+    greedy filling gives (a frame longer than ``limit`` goes alone). One ``sendto`` per output set
+    instead of one per message: receivers parse a datagram as a stream of frames."""
+    out: list[bytes] = []
+    group: list[bytes] = []
+    size = 0
+    for f in frames:
+        if group and size + len(f) > limit:
+            out.append(b"".join(group))
+            group, size = [], 0
+        group.append(f)
+        size += len(f)
+    if group:
+        out.append(b"".join(group))
+    return out
+
+
 class LinkError(OSError):
     """A link that cannot be opened, with a message naming it."""
 

@@ -11,12 +11,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Sequence
 
-import numpy as np
-
-from ..core.frames import local_ned
+from ..core.frames import local_ned_s
 from ..core.records import Solution, Uncertainty
-from ..core.rotation import quat_to_dcm
+from ..core.rotation import quat_to_dcm_s
 from .mavlink import mavlink
 
 NAN21 = [float("nan")] * 21
@@ -36,31 +35,33 @@ class PublishConfig:
 
 
 def encode(mav: mavlink.MAVLink, out: Solution, cfg: PublishConfig, reset_counter: int = 0) -> list[mavlink.MAVLink_message]:
-    """ATTITUDE, ATTITUDE_QUATERNION, LOCAL_POSITION_NED, GLOBAL_POSITION_INT and ODOMETRY."""
-    r = out.row
-    t = float(r[0])
+    """ATTITUDE, ATTITUDE_QUATERNION, LOCAL_POSITION_NED, GLOBAL_POSITION_INT and ODOMETRY.
+
+    Python floats throughout (one ``tolist`` of the row): an output set is made at up to the IMU rate."""
+    t, lat, lon, h, vn, ve, vd, roll, pitch, yaw, q0, q1, q2, q3 = out.row[:14].tolist()
+    q = [q0, q1, q2, q3]
+    p, qr, rr = out.gyro.tolist()
     usec = int(round(t * 1e6))
     ms = (usec // 1000) % (2**32)
-    lat, lon, h = float(r[1]), float(r[2]), float(r[3])
-    vn, ve, vd = float(r[4]), float(r[5]), float(r[6])
-    roll, pitch, yaw = float(r[7]), float(r[8]), float(r[9])
-    q = [float(x) for x in r[10:14]]
-    p, qr, rr = (float(x) for x in out.gyro)
-    ned = local_ned(lat, lon, h, out.origin)
-    c_bn = quat_to_dcm(np.asarray(q))
-    v_body = c_bn.T @ np.array([vn, ve, vd])
-    pose_cov, vel_cov, quality = odometry_covariance(out.unc, c_bn)
+    o = out.origin
+    north, east, down = local_ned_s(lat, lon, h, math.radians(o[0]), math.radians(o[1]), o[2])
+    c = quat_to_dcm_s((q0, q1, q2, q3))  # C_b^n, row-major
+    # v^b = C_n^b v^n = (C_b^n)^T v^n
+    vx = c[0] * vn + c[3] * ve + c[6] * vd
+    vy = c[1] * vn + c[4] * ve + c[7] * vd
+    vz = c[2] * vn + c[5] * ve + c[8] * vd
+    pose_cov, vel_cov, quality = odometry_covariance(out.unc, c)
     hdg = int(round(math.degrees(yaw) * 100)) % 36000
     return [
         mav.attitude_encode(ms, roll, pitch, yaw, p, qr, rr),
-        mav.attitude_quaternion_encode(ms, q[0], q[1], q[2], q[3], p, qr, rr, [0.0, 0.0, 0.0, 0.0]),
-        mav.local_position_ned_encode(ms, float(ned[0]), float(ned[1]), float(ned[2]), vn, ve, vd),
+        mav.attitude_quaternion_encode(ms, q0, q1, q2, q3, p, qr, rr, [0.0, 0.0, 0.0, 0.0]),
+        mav.local_position_ned_encode(ms, north, east, down, vn, ve, vd),
         mav.global_position_int_encode(
             ms,
             int(round(math.degrees(lat) * 1e7)),
             int(round(math.degrees(lon) * 1e7)),
             _i32((h - cfg.geoid_height) * 1000),
-            _i32((h - out.origin[2]) * 1000),
+            _i32((h - o[2]) * 1000),
             _cms(vn),
             _cms(ve),
             _cms(vd),
@@ -70,13 +71,13 @@ def encode(mav: mavlink.MAVLink, out: Solution, cfg: PublishConfig, reset_counte
             usec,
             cfg.odometry_frame,
             mavlink.MAV_FRAME_BODY_FRD,
-            float(ned[0]),
-            float(ned[1]),
-            float(ned[2]),
+            north,
+            east,
+            down,
             q,
-            float(v_body[0]),
-            float(v_body[1]),
-            float(v_body[2]),
+            vx,
+            vy,
+            vz,
             p,
             qr,
             rr,
@@ -103,22 +104,30 @@ def quality(sigma_h: float) -> int:
     return int(min(100, max(1, round(q))))
 
 
-def odometry_covariance(unc: Uncertainty | None, c_bn: np.ndarray) -> tuple[list[float], list[float], int]:
+def odometry_covariance(unc: Uncertainty | None, c_bn: Sequence[float]) -> tuple[list[float], list[float], int]:
     """ODOMETRY ``pose_covariance``, ``velocity_covariance`` (upper triangles, diagonals only,
-    off-diagonals 0) and ``quality``. Pose: NED position variances, then roll/pitch from the
-    level attitude error and yaw from its down component (rad^2). Velocity: the NED velocity
-    covariance rotated into the body frame (``C_n^b P_v C_b^n``, diagonal), then the body
-    rates' variances from the gyro-bias uncertainty. Without a filter: NaN (unknown), quality 0."""
+    off-diagonals 0) and ``quality``; ``c_bn`` is C_b^n as a row-major 9-sequence. Pose: NED
+    position variances, then roll/pitch from the level attitude error and yaw from its down
+    component (rad^2). Velocity: the NED velocity covariance rotated into the body frame
+    (``C_n^b P_v C_b^n``, diagonal: ``var_j = sum_i C_ij^2 var_i``), then the body rates'
+    variances from the gyro-bias uncertainty. Without a filter: NaN (unknown), quality 0."""
     if unc is None:
         return NAN21, NAN21, 0
+    pn, pe, pd = unc.sigma_pos.tolist()
+    vn, ve, vd = (x * x for x in unc.sigma_vel.tolist())
+    an, ae, ad = unc.sigma_att.tolist()
+    gx, gy, gz = unc.sigma_gyro.tolist()
+    level = 0.5 * (an * an + ae * ae)
     pose = [0.0] * 21
     vel = [0.0] * 21
-    level = 0.5 * (unc.sigma_att[0] ** 2 + unc.sigma_att[1] ** 2)
-    for k, var in zip(COV_DIAG, (*(unc.sigma_pos ** 2), level, level, unc.sigma_att[2] ** 2)):
-        pose[k] = float(var)
-    var_b = (c_bn ** 2).T @ (unc.sigma_vel ** 2)
-    for k, var in zip(COV_DIAG, (*var_b, *(unc.sigma_gyro ** 2))):
-        vel[k] = float(var)
+    for k, var in zip(COV_DIAG, (pn * pn, pe * pe, pd * pd, level, level, ad * ad)):
+        pose[k] = var
+    c = c_bn
+    var_b = (c[0] ** 2 * vn + c[3] ** 2 * ve + c[6] ** 2 * vd,
+             c[1] ** 2 * vn + c[4] ** 2 * ve + c[7] ** 2 * vd,
+             c[2] ** 2 * vn + c[5] ** 2 * ve + c[8] ** 2 * vd)
+    for k, var in zip(COV_DIAG, (*var_b, gx * gx, gy * gy, gz * gz)):
+        vel[k] = var
     return pose, vel, quality(horizontal_sigma(unc))
 
 

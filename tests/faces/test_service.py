@@ -38,7 +38,14 @@ class Received(StampedReceiver):
 
     def __init__(self) -> None:
         self.msgs: list[mavlink.MAVLink_message] = []
+        self.groups: list[list[str]] = []  # the message names of each datagram, in order
+        self.sizes: list[int] = []  # bytes of each datagram
         super().__init__()
+
+    def datagram(self, arrival: float, data: bytes, msgs: list[mavlink.MAVLink_message]) -> None:
+        self.sizes.append(len(data))
+        self.groups.append([m.get_type() for m in msgs])
+        super().datagram(arrival, data, msgs)
 
     def take(self, arrival: float, m: mavlink.MAVLink_message) -> None:
         if m.get_type() != "BAD_DATA":
@@ -254,6 +261,20 @@ def test_solution_file_and_summary_count_every_published_set(tmp_path: Path) -> 
     assert np.allclose(rows[:, 0], [m.time_boot_ms * 1e-3 for m in att], atol=1e-3)
     assert s.lines()[:3] == [f"messages received: {s.messages}", f"output sets published: {s.outputs}",
                              "final state: NAVIGATING"]
+
+
+def test_an_output_set_goes_out_as_one_datagram_in_the_documented_order() -> None:
+    run = Running()
+    mav = run.mav()
+    autopilot_heartbeat(mav)
+    for k in range(1, 201):
+        imu(mav, k * 0.01)
+    s = run.stop()
+    sets = [g for g in run.out.groups if "ATTITUDE" in g]
+    assert len(sets) == s.outputs == pytest.approx(15, abs=1)
+    five = ["ATTITUDE", "ATTITUDE_QUATERNION", "LOCAL_POSITION_NED", "GLOBAL_POSITION_INT", "ODOMETRY"]
+    assert all(g[:5] == five for g in sets)  # the whole set, in one datagram (docs/service.md)
+    assert max(run.out.sizes) <= 1472  # an Ethernet frame's UDP payload: never fragmented
 
 
 def test_sys_status_reports_the_imu_healthy_once_navigating_and_the_rejections() -> None:

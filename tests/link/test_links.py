@@ -117,6 +117,16 @@ def link():
 # ---- opening links ----------------------------------------------------------------------------------------------
 
 
+def test_datagrams_join_frames_in_order_up_to_the_limit() -> None:
+    a, b, c, d = b"a" * 600, b"b" * 600, b"c" * 600, b"d" * 100
+    assert links.datagrams([a, b, c, d], limit=1472) == [a + b, c + d]
+    assert links.datagrams([a, b], limit=1200) == [a + b]  # exactly the limit fits
+    assert links.datagrams([a, b], limit=1199) == [a, b]
+    assert links.datagrams([d, b"x" * 2000, d], limit=1472) == [d, b"x" * 2000, d]  # too long: alone, in place
+    assert links.datagrams([]) == []
+    assert links.MAX_OUT_DATAGRAM == 1500 - 20 - 8  # Ethernet MTU less the IPv4 and UDP headers
+
+
 def test_defaults_are_the_documented_ones() -> None:
     """PeerPolicy defaults are docs/service.md's: peers 10 s and 8, overload after 2 s of data older than 0.25 s."""
     p = PeerPolicy()

@@ -251,7 +251,7 @@ def test_odometry_covariances_and_quality_from_the_filter():
 
 
 def test_odometry_covariance_without_filter_is_nan():
-    pose, vel, q = publish.odometry_covariance(None, np.eye(3))
+    pose, vel, q = publish.odometry_covariance(None, tuple(np.eye(3).ravel()))
     assert len(pose) == 21 and len(vel) == 21
     assert all(math.isnan(x) for x in pose + vel) and q == 0
 
@@ -449,7 +449,7 @@ def test_statustext_of_51_bytes_is_two_chunks():
 
 
 def test_covariances_are_6x6_upper_triangles():
-    pose, vel, _ = publish.odometry_covariance(uncertainty(), np.eye(3))
+    pose, vel, _ = publish.odometry_covariance(uncertainty(), tuple(np.eye(3).ravel()))
     assert len(pose) == 21 and len(vel) == 21  # MAVLink ODOMETRY float[21]
     assert [k for k, v in enumerate(pose) if v] == [0, 6, 11, 15, 18, 20]
     assert [k for k, v in enumerate(vel) if v] == [0, 6, 11, 15, 18, 20]
