@@ -4,7 +4,8 @@ analysis and the benchmarks, against values typed here.
 Radii: WGS-84 meridian and prime-vertical radii, R_N = a (1 - e^2) / (1 - e^2 sin^2 L)^1.5 and
 R_E = a / sqrt(1 - e^2 sin^2 L) (NIMA TR8350.2 eq. 4-18, 4-15); attitude error: docs/conventions.md
 "Aided navigation", ``q(est) = q(phi) (x) q(true)`` with q(phi) = [cos |phi|/2, sin(|phi|/2) phi/|phi|]
-(Hamilton, [w x y z]). local_ned is killed by test_publish.py (LOCAL_POSITION_NED).
+(Hamilton, [w x y z]). Local NED offset: geodetic to ECEF (NIMA TR8350.2 eq. 4-14) differenced and rotated by
+C_e^n of the origin, whose rows are the north, east and down unit vectors in ECEF.
 """
 from __future__ import annotations
 
@@ -26,6 +27,31 @@ def hamilton(p, q) -> np.ndarray:
     """p (x) q, both [w x y z]."""
     pw, pv, qw, qv = p[0], np.asarray(p[1:]), q[0], np.asarray(q[1:])
     return np.concatenate([[pw * qw - pv @ qv], pw * qv + qw * pv + np.cross(pv, qv)])
+
+
+def ecef(lat: float, lon: float, h: float) -> np.ndarray:
+    r_e = A / math.sqrt(1.0 - E2 * math.sin(lat) ** 2)
+    return np.array([(r_e + h) * math.cos(lat) * math.cos(lon), (r_e + h) * math.cos(lat) * math.sin(lon),
+                     (r_e * (1.0 - E2) + h) * math.sin(lat)])
+
+
+@pytest.mark.parametrize("origin, point", [
+    ((0.8, 0.15, 400.0), (0.8 + 1e-4, 0.15 - 2e-4, 425.0)),  # hundreds of metres: a vehicle near its origin
+    ((-0.6, 2.5, -30.0), (-0.55, 2.6, 9000.0)),  # hundreds of kilometres and 9 km up: the earth's curvature shows
+    ((1.5, -3.0, 0.0), (1.4999, 3.1, 10.0)),  # near the pole, across the antimeridian
+])
+def test_local_ned_is_the_ecef_difference_on_the_origins_north_east_and_down(origin, point) -> None:
+    lat0, lon0, h0 = origin
+    north = np.array([-math.sin(lat0) * math.cos(lon0), -math.sin(lat0) * math.sin(lon0), math.cos(lat0)])
+    east = np.array([-math.sin(lon0), math.cos(lon0), 0.0])
+    down = -np.array([math.cos(lat0) * math.cos(lon0), math.cos(lat0) * math.sin(lon0), math.sin(lat0)])
+    d = ecef(*point) - ecef(*origin)
+    want = (north @ d, east @ d, down @ d)
+    got = frames.local_ned_s(*point, *origin)
+    # ECEF coordinates of ~6.4e6 m carry ~1e-9 m of rounding each: 1e-7 m leaves a hundredfold margin
+    assert got == pytest.approx(want, rel=0, abs=1e-7)
+    deg = (math.degrees(lat0), math.degrees(lon0), h0)
+    assert frames.local_ned(*point, deg) == pytest.approx(want, rel=0, abs=1e-7)  # the origin in degrees
 
 
 def test_north_east_error_through_the_reference_radii() -> None:
