@@ -38,7 +38,7 @@ def encode(mav: mavlink.MAVLink, out: Solution, cfg: PublishConfig, reset_counte
     """ATTITUDE, ATTITUDE_QUATERNION, LOCAL_POSITION_NED, GLOBAL_POSITION_INT and ODOMETRY.
 
     Python floats throughout (one ``tolist`` of the row): an output set is made at up to the IMU rate."""
-    t, lat, lon, h, vn, ve, vd, roll, pitch, yaw, q0, q1, q2, q3 = out.row[:14].tolist()
+    t, lat, lon, h, vn, ve, vd, roll, pitch, yaw, q0, q1, q2, q3 = out.row.tolist()  # strapdown.OUT_COLUMNS
     q = [q0, q1, q2, q3]
     p, qr, rr = out.gyro.tolist()
     usec = int(round(t * 1e6))

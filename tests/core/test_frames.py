@@ -39,6 +39,7 @@ def ecef(lat: float, lon: float, h: float) -> np.ndarray:
     ((0.8, 0.15, 400.0), (0.8 + 1e-4, 0.15 - 2e-4, 425.0)),  # hundreds of metres: a vehicle near its origin
     ((-0.6, 2.5, -30.0), (-0.55, 2.6, 9000.0)),  # hundreds of kilometres and 9 km up: the earth's curvature shows
     ((1.5, -3.0, 0.0), (1.4999, 3.1, 10.0)),  # near the pole, across the antimeridian
+    ((0.7, 0.2, 100.0), (0.7, 0.21, 100.0)),  # along the parallel: the same ECEF z, a zero difference
 ])
 def test_local_ned_is_the_ecef_difference_on_the_origins_north_east_and_down(origin, point) -> None:
     lat0, lon0, h0 = origin

@@ -122,6 +122,7 @@ def test_datagrams_join_frames_in_order_up_to_the_limit() -> None:
     assert links.datagrams([a, b, c, d], limit=1472) == [a + b, c + d]
     assert links.datagrams([a, b], limit=1200) == [a + b]  # exactly the limit fits
     assert links.datagrams([a, b], limit=1199) == [a, b]
+    assert links.datagrams([a, b, c, b], limit=1200) == [a + b, c + b]  # a later datagram fills up exactly too
     assert links.datagrams([d, b"x" * 2000, d], limit=1472) == [d, b"x" * 2000, d]  # too long: alone, in place
     assert links.datagrams([]) == []
     assert links.MAX_OUT_DATAGRAM == 1500 - 20 - 8  # Ethernet MTU less the IPv4 and UDP headers
