@@ -40,6 +40,7 @@ from .common.fleet import Outcome, batch_outputs, write_summary
 from .live.imuset import DISCOVERY_S
 from .link.ingest import HIGHRES_ACC_GYRO, HIGHRES_MAG, IMU_MESSAGES, IngestConfig
 from .link import publish
+from .link.decode import decode_one
 from .link.mavlink import mavlink
 from .live.pipeline import GNSS_MESSAGES, UINT16_UNKNOWN, Pipeline
 from .live.smoothing import KeptRows
@@ -666,8 +667,9 @@ def _bin_messages(path: Path, report: LogReport) -> Iterator[tuple[float, mavlin
 def _tlog_messages(path: Path, report: LogReport) -> Iterator[tuple[float, mavlink.MAVLink_message]]:
     """Records of a tlog (8-byte big-endian microsecond time + one MAVLink frame), streamed.
 
-    Frames are split by their own length fields and decoded by pymavlink's
-    ``MAVLink.decode`` (CRC checked), the decoder the live path uses; memory
+    Frames are split by their own length fields and decoded as the live link decodes a
+    datagram: an unsigned MAVLink 2 frame of a plain message in one step (``decode.decode_one``),
+    any other by pymavlink's ``MAVLink.decode``, both CRC checked; memory
     stays flat however long the log is. Bytes that are not a frame are
     reported as BAD_DATA (and in the report), and reading resumes at the next
     frame marker; a record cut off by the end of the file is reported.
@@ -713,11 +715,13 @@ def _tlog_messages(path: Path, report: LogReport) -> Iterator[tuple[float, mavli
             frame = buf[start : start + n]
             rec = pos
             pos = start + n
-            try:
-                msg = parser.decode(bytearray(frame))
-            except Exception as exc:  # MAVError (CRC, length); anything else pymavlink may raise on junk
-                report.skip(offset + rec, pos - rec)
-                msg = mavlink.MAVLink_bad_data(bytearray(frame[:64]), str(exc))
+            msg = decode_one(frame)  # the common frame in one step, as the live link decodes a datagram
+            if msg is None:
+                try:
+                    msg = parser.decode(bytearray(frame))
+                except Exception as exc:  # MAVError (CRC, length); anything else pymavlink may raise on junk
+                    report.skip(offset + rec, pos - rec)
+                    msg = mavlink.MAVLink_bad_data(bytearray(frame[:64]), str(exc))
             yield (offset + pos) / size, msg
 
 

@@ -294,6 +294,8 @@ class Service:
         if now - self._last_hb >= 1.0:
             self._last_hb = now
             self._send([publish.heartbeat(self.mav, self.pipeline.engine.state is State.NAVIGATING)])
+            if self._solution is not None:
+                self._solution.flush()  # the solution file at most a second behind (docs/service.md)
         if now - self._last_status >= SYS_STATUS_PERIOD:
             self._last_status = now
             self._send([self._sys_status(now)])

@@ -25,7 +25,7 @@ def _add_run(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--compid", type=_positive_int(1, 255), default=191, metavar="ID",
                    help="our component id (191 = onboard computer)")
     p.add_argument("--tlog", type=Path, metavar="FILE", help="record every received message (replayable)")
-    p.add_argument("-o", "--output", type=Path, metavar="NAV.csv", help="also write each output set as a solution row")
+    p.add_argument("-o", "--output", type=Path, metavar="NAV.csv", help="also write each output set as a solution row (a CSV is written once a second; .parquet by the suffix, complete at the stop)")
     p.add_argument("--request-imu", type=_real(0.0, 1e4, above=True), metavar="HZ", help="ask the autopilot for HIGHRES_IMU at HZ")
     p.add_argument("--rerun", type=Path, metavar="FILE.rrd", help="record to a Rerun file")
     p.add_argument("--rerun-serve", action="store_true", help="serve the recording for a live Rerun viewer")

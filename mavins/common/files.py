@@ -752,33 +752,40 @@ def read_solution(path: str | Path) -> np.ndarray:
 
 
 class SolutionWriter:
-    """Write solution rows (kernel units) to a solution CSV as they come: the 14 solution columns,
+    """Write solution rows (kernel units) to a solution file as they come: the 14 solution columns,
     or with ``columns`` (the filter's, core.aided.ROW_COLUMNS) those, in file units
-    (core.aided.unit_factors)."""
+    (core.aided.unit_factors). Rows are kept ``block`` at a time and written as a table
+    (:class:`TableWriter`: round-trip text, or parquet by the suffix); :meth:`flush` writes what is
+    kept (the service does once a second), :meth:`close` the rest."""
 
-    def __init__(self, path: str | Path, columns: tuple[str, ...] = SOLUTION_COLUMNS) -> None:
+    def __init__(self, path: str | Path, columns: tuple[str, ...] = SOLUTION_COLUMNS, block: int = 4096) -> None:
+        from ..core.aided import unit_factors
+
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._fh = open(self.path, "w", encoding="utf-8", newline="")
-        self._fh.write(",".join(columns) + "\n")
-        self._width = len(columns)
-        self._factors = None
-        if self._width != len(SOLUTION_COLUMNS):
-            from ..core.aided import unit_factors
-
-            self._factors = unit_factors(columns)
+        self._table = TableWriter(self.path, columns)
+        self._factors = unit_factors(columns)
+        self._kept = np.empty((max(1, block), len(columns)))
+        self._n = 0
         self.rows = 0
 
     def write(self, row: np.ndarray) -> None:
-        if row.shape[0] != self._width:
-            raise ValueError(f"a row of {row.shape[0]} values for {self._width} columns")
-        if self._factors is None:
-            r = row.copy()
-            r[[1, 2, 7, 8, 9]] = np.degrees(r[[1, 2, 7, 8, 9]])
-        else:
-            r = row * self._factors
-        self._fh.write(",".join(map(repr, r.tolist())) + "\n")
+        if row.shape[0] != self._kept.shape[1]:
+            raise ValueError(f"a row of {row.shape[0]} values for {self._kept.shape[1]} columns")
+        self._kept[self._n] = row
+        self._n += 1
         self.rows += 1
+        if self._n == self._kept.shape[0]:
+            self.flush()
+
+    def flush(self) -> None:
+        """Write the rows kept so far."""
+        if self._n:
+            self._table.write(self._kept[: self._n] * self._factors)
+            self._n = 0
 
     def close(self) -> None:
-        self._fh.close()
+        try:
+            self.flush()
+        finally:
+            self._table.close()

@@ -717,8 +717,8 @@ def test_write_table_parquet_and_row_groups(tmp_path: Path) -> None:
 
 
 def test_solution_writer_degrees_and_round_trip(tmp_path: Path) -> None:
-    """Radians in, degrees out for lat, lon, roll, pitch, yaw only; repr text; missing folders are made, an
-    existing one is used; read back exactly."""
+    """Radians in, degrees out for lat, lon, roll, pitch, yaw only; round-trip text of at most 17 significant
+    digits (docs/conventions.md "Files"); missing folders are made, an existing one is used; read back exactly."""
     rad = np.array([0.1, math.pi / 4, -math.pi / 2, 100.5, 5e-324, -0.0, 1e-300, 0.25, -0.5, math.pi,
                     math.nextafter(1.0, 0.0), 0.1, -0.2, 0.3])
     p = tmp_path / "out" / "run" / "nav.csv"
@@ -733,13 +733,38 @@ def test_solution_writer_degrees_and_round_trip(tmp_path: Path) -> None:
         deg[j] = math.degrees(rad[j])
     lines = p.read_text(encoding="utf-8").split("\n")
     assert lines[0] == ",".join(files.SOLUTION_COLUMNS) and lines[3] == ""
-    assert lines[1] == ",".join(repr(float(v)) for v in deg)
+    fields = lines[1].split(",")
+    assert [float(f) for f in fields] == [float(v) for v in deg]
+    assert all(math.copysign(1.0, float(f)) == math.copysign(1.0, v) for f, v in zip(fields, deg))  # -0.0 stays
+    assert all(len(re.sub(r"e.*|[^0-9]", "", f).strip("0") or "0") <= 17 for f in fields)
     back = files.read_solution(p)
     assert hexes(back[0]) == hexes(deg) and back.shape == (2, 14) and back[1, 0] == 1.1
     assert deg[1] == 45.0 and deg[2] == -90.0 and deg[9] == 180.0
     second = files.SolutionWriter(p.parent / "again.csv")
     second.close()
     assert (p.parent / "again.csv").read_text(encoding="utf-8") == ",".join(files.SOLUTION_COLUMNS) + "\n"
+
+
+def test_solution_writer_keeps_a_block_and_writes_it_when_full_flushed_or_closed(tmp_path: Path) -> None:
+    p = tmp_path / "nav.csv"
+    row = np.arange(14.0)
+    w = files.SolutionWriter(p, block=3)
+    header = ",".join(files.SOLUTION_COLUMNS) + "\n"
+    body = lambda: p.read_text(encoding="utf-8")[len(header):].splitlines()  # noqa: E731
+    w.write(row)
+    w.write(row + 1.0)
+    assert p.read_text(encoding="utf-8") == header and w.rows == 2  # kept, not written yet
+    w.write(row + 2.0)
+    assert [float(x.split(",")[0]) for x in body()] == [0.0, 1.0, 2.0]  # the block is full: written
+    w.write(row + 3.0)
+    w.flush()
+    assert len(body()) == 4
+    w.flush()  # nothing kept: nothing written
+    w.write(row + 4.0)
+    w.close()
+    assert [float(x.split(",")[0]) for x in body()] == [0.0, 1.0, 2.0, 3.0, 4.0] and w.rows == 5
+    with pytest.raises(ValueError, match="a row of 13 values for 14 columns"):
+        files.SolutionWriter(tmp_path / "x.csv").write(np.zeros(13))
 
 
 def test_gnss_rows_without_a_position_are_no_fix_with_only_the_required_columns(tmp_path: Path) -> None:

@@ -75,6 +75,22 @@ def test_replay_of_the_live_tlog_writes_the_same_solution(live: tuple[Path, Path
     assert again.read_bytes() == live_csv.read_bytes(), "replay differs from live"
 
 
+def test_replay_to_parquet_holds_the_same_doubles(live: tuple[Path, Path, str], tmp_path: Path) -> None:
+    """docs/conventions.md "Files": a table named as CSV may be written as .parquet, float64 columns of the same names."""
+    import pyarrow.parquet as pq
+
+    tlog, live_csv, _ = live
+    out = tmp_path / "replay.parquet"
+    res = mavins("replay", str(tlog), "-o", str(out), *NAV_OPTIONS, cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    table = pq.read_table(out)
+    header = live_csv.read_text().split("\n", 1)[0].split(",")
+    want = np.loadtxt(live_csv, delimiter=",", skiprows=1, ndmin=2)
+    got = np.column_stack([table.column(c).to_numpy() for c in table.column_names])
+    assert table.column_names == header and got.shape == want.shape
+    assert np.array_equal(got.view(np.int64), want.view(np.int64))  # bit for bit, NaN included
+
+
 def test_replay_with_other_options_differs(live: tuple[Path, Path, str], tmp_path: Path) -> None:
     """Control: the identity above is not an accident of options being ignored."""
     tlog, live_csv, _ = live

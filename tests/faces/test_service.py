@@ -263,6 +263,24 @@ def test_solution_file_and_summary_count_every_published_set(tmp_path: Path) -> 
                              "final state: NAVIGATING"]
 
 
+def test_the_solution_file_is_written_while_the_service_runs(tmp_path: Path) -> None:
+    """Rows are kept in blocks and flushed with each heartbeat (once a second of wall time): a reader of
+    the file sees every published set without waiting for the service to stop."""
+    nav = tmp_path / "nav.csv"
+    run = Running(solution=nav)
+    mav = run.mav()
+    autopilot_heartbeat(mav)
+    for k in range(1, 201):
+        imu(mav, k * 0.01)
+    run.read_all()
+    att = wait_until(lambda: len(run.out.of("ATTITUDE")) >= 14 and run.out.of("ATTITUDE"), "the output sets")
+    rows = wait_until(lambda: nav.exists() and nav.read_text().count("\n") - 1 >= len(att) and nav.read_text(),
+                      "every published set in the file while the service runs")
+    assert run.thread.is_alive()  # still serving: the rows came from the flush, not from closing
+    s = run.stop()
+    assert rows.count("\n") - 1 == s.outputs
+
+
 def test_an_output_set_goes_out_as_one_datagram_in_the_documented_order() -> None:
     run = Running()
     mav = run.mav()
