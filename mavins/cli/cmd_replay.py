@@ -18,7 +18,7 @@ def _add_replay(sub: argparse._SubParsersAction) -> None:
                    "writing each output set as a solution row (same results as live).")
     p.add_argument("log", type=Path, nargs="+", metavar="LOG", help=".tlog, .bin or .ulg (several with --each)")
     p.add_argument("-o", "--output", type=Path, required=True, metavar="NAV.csv",
-                   help="solution CSV to write; with --each a folder")
+                   help="solution CSV to write (.parquet by the suffix); with --each a folder")
     p.add_argument("--rerun", type=Path, metavar="FILE.rrd", help="also write a Rerun recording")
     b = p.add_argument_group("fleet (many logs, each on its own)")
     b.add_argument("--each", action="store_true",
