@@ -763,6 +763,9 @@ def test_solution_writer_keeps_a_block_and_writes_it_when_full_flushed_or_closed
     w.write(row + 4.0)
     w.close()
     assert [float(x.split(",")[0]) for x in body()] == [0.0, 1.0, 2.0, 3.0, 4.0] and w.rows == 5
+    one = files.SolutionWriter(tmp_path / "one.csv", block=1)  # a block of one row: each written at once
+    one.write(row)
+    assert (tmp_path / "one.csv").read_text(encoding="utf-8").count("\n") == 2
     with pytest.raises(ValueError, match="a row of 13 values for 14 columns"):
         files.SolutionWriter(tmp_path / "x.csv").write(np.zeros(13))
 
