@@ -767,14 +767,17 @@ class SolutionWriter:
         self._factors = unit_factors(columns)
         self._kept = np.empty((max(1, block), len(columns)))
         self._n = 0
-        self.rows = 0
+
+    @property
+    def rows(self) -> int:
+        """Rows written so far, kept ones included."""
+        return self._table.rows + self._n
 
     def write(self, row: np.ndarray) -> None:
         if row.shape[0] != self._kept.shape[1]:
             raise ValueError(f"a row of {row.shape[0]} values for {self._kept.shape[1]} columns")
         self._kept[self._n] = row
         self._n += 1
-        self.rows += 1
         if self._n == self._kept.shape[0]:
             self.flush()
 

@@ -36,7 +36,7 @@ SO_RXQ_OVFL = getattr(socket, "SO_RXQ_OVFL", 40 if _LINUX else None)
 
 
 # bytes: MAVLink frames sent together share a datagram up to this size, which fits an Ethernet
-# frame (1500 - 20 IP - 8 UDP), so that no datagram is fragmented on its way (docs/autopilots.md)
+# frame (1500 - 20 IP - 8 UDP), so that no datagram is fragmented on its way (docs/service.md)
 MAX_OUT_DATAGRAM = 1472
 
 
